@@ -1,0 +1,203 @@
+"""Newton/chord iteration for the implicit stages of diffrax solvers.
+
+Why not diffrax's default: diffrax 0.7.2's ``VeryChord`` (and ``optimistix.Chord``
+with ``cauchy_termination=False``) end the iteration after two steps and report
+divergence whenever the contraction estimate has not *already* met the tolerance --
+even when the iteration is contracting nicely. Every harder stage solve then fails and
+the step is rejected; stiff strings see thousands of needless rejections (fixed
+upstream in diffrax PR 754 / optimistix PR 230, not released).
+
+This root finder follows Hairer & Wanner, *Solving ODEs II*, section IV.8:
+
+* the iteration continues while it contracts (rate ``theta < 1``);
+* it has converged when ``theta / (1 - theta) * |dz| <= kappa`` (or the first
+  increment is already negligible);
+* it is declared divergent when ``theta >= 1``, or when the predicted error after the
+  remaining iterations, ``theta**(k_max - k) / (1 - theta) * |dz|``, is still above
+  ``kappa`` -- then the step is rejected early and retried with a smaller step.
+
+Increments are measured in the units of the *state* y, scaled by ``atol + rtol |y|``
+(the error-controller's norm). diffrax solves Kvaerno stages in "f-space" (the unknown
+is the stage derivative f_i with y_i = y_partial + a_ii dt f_i) and implicit Euler in
+"k-space" (the unknown is the increment); we recognise both argument layouts and
+convert the increment to its effect on y, so the test does not depend on dt.
+
+With ``newton=True`` the Jacobian is recomputed at every iteration (full Newton):
+the right choice for fixed-step methods, which cannot reject a step.
+"""
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.lax as lax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import lineax as lx
+import optimistix as optx
+from jaxtyping import PyTree, Scalar
+
+
+class _NoAux(eqx.Module):
+    fn: Callable
+
+    def __call__(self, y, args):
+        out, _ = self.fn(y, args)
+        return out
+
+
+class _StageState(eqx.Module):
+    linear_state: tuple[lx.AbstractLinearOperator, PyTree[Any]]
+    diffsize: Scalar
+    diffsize_prev: Scalar
+    result: optx.RESULTS
+    step: Scalar
+    n_jac: Scalar
+
+
+def _to_y_units(diff, y_new, args):
+    """Return (increment of the state, the new state) for diffrax's argument layouts."""
+    if isinstance(args, tuple) and len(args) == 8:
+        # ESDIRK in f-space: (stage_index, diagonal, vf, prod, ti, yi_partial, args, control)
+        _, diagonal, _, prod, _, yi_partial, _, control = args
+        dy = jtu.tree_map(lambda d: diagonal * d, prod(diff, control))
+        yi = jtu.tree_map(lambda a, f: a + diagonal * f, yi_partial, prod(y_new, control))
+        return dy, yi
+    if isinstance(args, tuple) and len(args) == 7:
+        # ESDIRK in k-space: (stage_index, diagonal, vf_prod, ti, yi_partial, args, control)
+        _, diagonal, _, _, yi_partial, _, _ = args
+        dy = jtu.tree_map(lambda d: diagonal * d, diff)
+        yi = jtu.tree_map(lambda a, k: a + diagonal * k, yi_partial, y_new)
+        return dy, yi
+    if isinstance(args, tuple) and len(args) == 5:
+        # Implicit Euler in k-space: (vf_prod, t1, y0, args, control)
+        _, _, y0, _, _ = args
+        return diff, jtu.tree_map(lambda a, k: a + k, y0, y_new)
+    # Unknown layout: measure in the unknown's own units.
+    return diff, y_new
+
+
+def _rms(tree):
+    leaves = jtu.tree_leaves(tree)
+    sq = sum(jnp.sum(jnp.abs(x) ** 2) for x in leaves)
+    n = sum(x.size for x in leaves)
+    return jnp.sqrt(sq / n)
+
+
+class StageNewton(optx.AbstractRootFinder):
+    """Simplified (chord) or full Newton iteration with Hairer's convergence test.
+
+    **Arguments:**
+
+    - `rtol`, `atol`: tolerances of the iteration, in the units of the state.
+    - `kappa`: safety factor: converged when the estimated remaining error is below
+      `kappa` times the tolerance (Hairer & Wanner use 0.01 ... 0.1).
+    - `max_iters`: the iteration limit the divergence prediction assumes; set the
+      solver's `root_find_max_steps` to the same number.
+    - `newton`: recompute the Jacobian at every iteration (for fixed-step methods).
+    - `linear_solver`: a lineax solver for the Newton matrix (dense LU by default).
+    """
+
+    rtol: Any
+    atol: Any
+    norm: Callable = _rms
+    kappa: float = 0.05
+    max_iters: int = 10
+    newton: bool = eqx.field(static=True, default=False)
+    linear_solver: lx.AbstractLinearSolver = lx.LU()
+
+    def _factor(self, fn, y, args, tags):
+        jac = lx.JacobianLinearOperator(_NoAux(fn), y, args, tags=tags)
+        jac = lx.linearise(jac)
+        state = self.linear_solver.init(jac, options={})
+        dynamic, static = eqx.partition(state, eqx.is_array)
+        state = eqx.combine(lax.stop_gradient(dynamic), static)
+        return (jac, state)
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        del f_struct, aux_struct
+        init_state = options.get("init_state")
+        if init_state is not None:
+            return init_state
+        leaves = jtu.tree_leaves(y)
+        dtype = jnp.result_type(*leaves) if leaves else jnp.float64
+        return _StageState(
+            linear_state=self._factor(fn, y, args, tags),
+            diffsize=jnp.array(jnp.inf, dtype=dtype),
+            diffsize_prev=jnp.array(1.0, dtype=dtype),
+            result=optx.RESULTS.successful,
+            step=jnp.array(0),
+            n_jac=jnp.array(1),
+        )
+
+    def step(self, fn, y, args, options, state, tags):
+        del options
+        if self.newton:
+            # Full Newton: a fresh Jacobian at the current iterate (the first
+            # iteration reuses the one the solver already built at y).
+            linear_state = lax.cond(
+                state.step == 0,
+                lambda: state.linear_state,
+                lambda: self._factor(fn, y, args, tags),
+            )
+        else:
+            linear_state = state.linear_state
+        fx, aux = fn(y, args)
+        jac, lin = linear_state
+        sol = lx.linear_solve(
+            jac, fx, self.linear_solver, state=lax.stop_gradient(lin), throw=False
+        )
+        diff = sol.value
+        new_y = jtu.tree_map(lambda a, b: a - b, y, diff)
+        dy, y_state = _to_y_units(diff, new_y, args)
+        with jax.numpy_dtype_promotion("standard"):
+            scaled = jtu.tree_map(
+                lambda d, s: d / (self.atol + self.rtol * jnp.abs(s)), dy, y_state
+            )
+            diffsize = self.norm(scaled)
+        new_state = _StageState(
+            linear_state=linear_state,
+            diffsize=jnp.asarray(diffsize, dtype=state.diffsize.dtype),
+            diffsize_prev=state.diffsize,
+            result=optx.RESULTS.promote(sol.result),
+            step=state.step + 1,
+            n_jac=state.n_jac + (state.step > 0) * int(self.newton),
+        )
+        return new_y, new_state, aux
+
+    def terminate(self, fn, y, args, options, state, tags):
+        del fn, y, args, options, tags
+        size = state.diffsize
+        finite = jnp.isfinite(size)
+        rate = size / state.diffsize_prev
+        have_rate = state.step >= 2
+        # First iteration: no rate estimate yet; accept only a negligible update.
+        first_ok = (state.step == 1) & (size <= 1e-3 * self.kappa)
+        tiny = size <= 1e-10
+        contracting = have_rate & (rate < 1)
+        eta = rate / (1 - rate)
+        converged = first_ok | tiny | (contracting & (eta * size <= self.kappa))
+        remaining = jnp.maximum(self.max_iters - state.step, 0)
+        hopeless = (
+            contracting
+            & (rate ** remaining / (1 - rate) * size > self.kappa)
+            & (not self.newton)
+        )
+        if self.newton:
+            diverged = ~finite | (have_rate & (rate >= 1) & (state.step >= 4))
+        else:
+            diverged = ~finite | (have_rate & (rate >= 1)) | hopeless
+        started = state.step >= 1
+        converged = converged & started
+        diverged = diverged & ~converged & started
+        linsolve_fail = (state.result != optx.RESULTS.successful) & started
+        terminate = converged | diverged | linsolve_fail
+        result = optx.RESULTS.where(
+            diverged, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful
+        )
+        result = optx.RESULTS.where(linsolve_fail, state.result, result)
+        return terminate, result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, {}

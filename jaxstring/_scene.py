@@ -1,0 +1,70 @@
+"""A scene: a model, the effects it calls for, its initial state and time span."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._effects import AbstractEffect
+from ._string import AbstractString, energy, tension
+from ._validate import check_finite, is_concrete
+
+
+class Scene(eqx.Module):
+    """Everything needed to simulate: model + effects + initial state + time span.
+
+    **Arguments:**
+
+    - `model`: the string (or later tether/vessel) model.
+    - `effects`: tuple of effect Modules. Only these are computed.
+    - `y0`: initial state in the model's layout.
+    - `t1`: end time, s (> t0). `t0`: start time, s.
+    - `name`: a label for plots and the command line.
+    """
+
+    model: AbstractString
+    effects: tuple[AbstractEffect, ...]
+    y0: Float[Array, "..."]
+    t1: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    t0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    name: str = eqx.field(static=True, default="scene")
+
+    def __check_init__(self):
+        if not isinstance(self.effects, tuple) or not all(
+            isinstance(e, AbstractEffect) for e in self.effects
+        ):
+            raise ValueError("`effects` must be a tuple of jaxstring effects.")
+        kinds = [type(e) for e in self.effects]
+        if len(set(kinds)) != len(kinds):
+            raise ValueError("`effects` names an effect twice.")
+        check_finite("y0", self.y0)
+        expected = jnp.shape(self.model.initial_state(0.0))
+        if tuple(jnp.shape(self.y0)) != tuple(expected):
+            raise ValueError(
+                f"`y0` has shape {jnp.shape(self.y0)}; the model needs {expected}."
+            )
+        if is_concrete(self.t1) and is_concrete(self.t0):
+            if not np.isfinite(float(self.t1)) or float(self.t1) <= float(self.t0):
+                raise ValueError(
+                    f"`t1` must be a finite time > t0 = {float(self.t0)} s; "
+                    f"got {self.t1!r}."
+                )
+
+    def vector_field(self, t, y):
+        """dy/dt of the state under the scene's effects."""
+        return self.model.vector_field(t, y, self.effects)
+
+    def tension(self, y):
+        return tension(self.model, y, self.effects)
+
+    def energy(self, y):
+        return energy(self.model, y, self.effects)
+
+    def has(self, kind: type) -> bool:
+        """Whether the scene calls for an effect of this type."""
+        return any(isinstance(e, kind) for e in self.effects)
+
+
+def scene_vector_field(t, y, scene: Scene):
+    """diffrax-style vector field: the scene travels as `args`, never closed over."""
+    return scene.vector_field(t, y)

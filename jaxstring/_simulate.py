@@ -1,0 +1,159 @@
+"""simulate(scene, ...) -> Trajectory."""
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._scene import Scene, scene_vector_field
+from ._solvers import build_solver, check_solver, is_adaptive
+from ._trajectory import Trajectory
+from ._validate import check_int, check_positive, is_concrete
+
+
+def observables(scene: Scene, ys):
+    """Derived observables of saved states `ys` (leading axis: time)."""
+    model = scene.model
+
+    def one(y):
+        kin = model.kinematics(y)
+        eps, _ = model.strain(y)
+        return (
+            kin.positions,
+            kin.velocities,
+            scene.tension(y),
+            eps,
+            scene.energy(y),
+            model.constraint_error(y),
+        )
+
+    return jax.vmap(one)(ys)
+
+
+@eqx.filter_jit
+def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptive,
+           max_steps, progress):
+    term = dfx.ODETerm(scene_vector_field)
+    dfx_solver = build_solver(solver, newton_rtol, newton_atol)
+    if adaptive:
+        controller = dfx.PIDController(rtol=rtol, atol=atol)
+    else:
+        controller = dfx.ConstantStepSize()
+    meter = dfx.TextProgressMeter(minimum_increase=0.05) if progress else (
+        dfx.NoProgressMeter()
+    )
+    sol = dfx.diffeqsolve(
+        term,
+        dfx_solver,
+        t0=scene.t0,
+        t1=scene.t1,
+        dt0=dt0,
+        y0=scene.y0,
+        args=scene,
+        saveat=dfx.SaveAt(ts=ts),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=False,
+        progress_meter=meter,
+    )
+    ys = sol.ys
+    # States after a failure are inf in diffrax's output: evaluate observables on
+    # finite states only, and mark how far the run got.
+    finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
+    n_valid = jnp.sum(jnp.cumprod(finite))
+    safe_ys = jnp.where(finite.reshape((-1,) + (1,) * (ys.ndim - 1)), ys, scene.y0)
+    pos, vel, ten, eps, en, cerr = observables(scene, safe_ys)
+
+    def mask(x):
+        m = finite.reshape((-1,) + (1,) * (x.ndim - 1))
+        return jnp.where(m, x, jnp.nan)
+
+    stats = {
+        key: sol.stats[key]
+        for key in ("num_steps", "num_accepted_steps", "num_rejected_steps", "max_steps")
+    }
+    t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
+    return Trajectory(
+        ts=ts,
+        ys=ys,
+        positions=mask(pos),
+        velocities=mask(vel),
+        tension=mask(ten),
+        strain=mask(eps),
+        energy=mask(en),
+        constraint_error=mask(cerr),
+        result=sol.result,
+        stats=stats,
+        t_end=t_end,
+        n_valid=n_valid,
+    )
+
+
+def simulate(
+    scene: Scene,
+    solver="kvaerno5",
+    *,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    ts=None,
+    n_save: int = 201,
+    dt0=None,
+    newton_rtol=None,
+    newton_atol=None,
+    max_steps: int = 200_000,
+    progress: bool = False,
+) -> Trajectory:
+    """Integrate a scene and return its Trajectory.
+
+    **Arguments:**
+
+    - `scene`: a `Scene` (see `jaxstring.scenes`).
+    - `solver`: a name -- `"kvaerno3"`, `"kvaerno4"`, `"kvaerno5"` (default),
+      `"implicit_euler"` (adaptive), `"implicit_euler_fixed"` (fixed step `dt0`),
+      `"tsit5"`, `"dopri5"` -- or any `diffrax.AbstractSolver` instance.
+    - `rtol`, `atol`: error tolerances of the step-size controller (> 0).
+    - `ts`: save times, s (default: `n_save` equally spaced points over the span).
+    - `dt0`: initial step, s (default: chosen by the controller); the step of a
+      fixed-step solver (default 0.005 s, the paper's).
+    - `newton_rtol`, `newton_atol`: tolerances of the stage Newton iteration
+      (default: `rtol`, `atol`).
+    - `max_steps`: limit on the number of steps.
+    - `progress`: print a text progress meter.
+
+    Implicit solvers build the Newton matrix from an autodiff (forward-mode)
+    Jacobian of the vector field. A failed solve does not raise: the returned
+    `Trajectory` has `ok == False`, a `status` message, and the data up to the
+    failure (`n_valid` saved rows; later rows are NaN).
+    """
+    if not isinstance(scene, Scene):
+        raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
+    check_solver(solver)
+    check_positive("rtol", rtol)
+    check_positive("atol", atol)
+    check_int("max_steps", max_steps, 1)
+    adaptive = is_adaptive(solver)
+    if not adaptive and dt0 is None:
+        dt0 = 0.005
+    if dt0 is not None:
+        check_positive("dt0", dt0, "s")
+        dt0 = jnp.asarray(dt0, dtype=jnp.float64)
+    if ts is None:
+        check_int("n_save", n_save, 2)
+        ts = jnp.linspace(scene.t0, scene.t1, n_save)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    if is_concrete(ts):
+        tsn = np.asarray(ts)
+        if tsn.ndim != 1 or np.any(np.diff(tsn) < 0):
+            raise ValueError("`ts` must be a 1-d array of increasing times.")
+        if tsn[0] < float(scene.t0) or tsn[-1] > float(scene.t1):
+            raise ValueError("`ts` must lie inside [scene.t0, scene.t1].")
+    nr = rtol if newton_rtol is None else newton_rtol
+    na = atol if newton_atol is None else newton_atol
+    check_positive("newton_rtol", nr)
+    check_positive("newton_atol", na)
+    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
+    return _solve(
+        scene, ts, f64(rtol), f64(atol), dt0, f64(nr), f64(na), solver, adaptive,
+        max_steps, progress,
+    )

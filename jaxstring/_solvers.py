@@ -1,0 +1,60 @@
+"""Solvers by name: diffrax methods with jaxstring's stage Newton iteration."""
+
+import diffrax as dfx
+
+from ._root_finder import StageNewton
+from ._validate import check_choice
+
+
+# name -> (description, adaptive step size?, implicit?)
+SOLVERS = {
+    "kvaerno3": ("ESDIRK order 3(2), A-L stable", True, True),
+    "kvaerno4": ("ESDIRK order 4(3), A-L stable", True, True),
+    "kvaerno5": ("ESDIRK order 5(4), A-L stable", True, True),
+    "implicit_euler": ("implicit Euler, adaptive (trapezoid error estimate)", True, True),
+    "implicit_euler_fixed": ("implicit Euler, fixed step dt0, full Newton", False, True),
+    "tsit5": ("explicit Tsitouras 5(4)", True, False),
+    "dopri5": ("explicit Dormand-Prince 5(4)", True, False),
+}
+
+_MAX_ITERS_ADAPTIVE = 10
+_MAX_ITERS_FIXED = 25
+
+
+def check_solver(solver) -> None:
+    if isinstance(solver, dfx.AbstractSolver):
+        return
+    check_choice("solver", solver, tuple(SOLVERS))
+
+
+def is_adaptive(solver) -> bool:
+    if isinstance(solver, dfx.AbstractSolver):
+        return isinstance(solver, dfx.AbstractAdaptiveSolver)
+    return SOLVERS[solver][1]
+
+
+def build_solver(solver, newton_rtol, newton_atol):
+    """Return a diffrax solver for a name (tolerances may be traced arrays)."""
+    if isinstance(solver, dfx.AbstractSolver):
+        return solver
+    chord = StageNewton(rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_ADAPTIVE)
+    if solver == "kvaerno3":
+        return dfx.Kvaerno3(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
+    if solver == "kvaerno4":
+        return dfx.Kvaerno4(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
+    if solver == "kvaerno5":
+        return dfx.Kvaerno5(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
+    if solver == "implicit_euler":
+        return dfx.ImplicitEuler(
+            root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
+        )
+    if solver == "implicit_euler_fixed":
+        newton = StageNewton(
+            rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_FIXED, newton=True
+        )
+        return dfx.ImplicitEuler(root_finder=newton, root_find_max_steps=_MAX_ITERS_FIXED)
+    if solver == "tsit5":
+        return dfx.Tsit5()
+    if solver == "dopri5":
+        return dfx.Dopri5()
+    raise AssertionError(solver)

@@ -1,0 +1,389 @@
+"""String pendulum models: displacement variables and natural variables.
+
+Three final classes share one interface (see ``AbstractString``):
+
+* ``DisplacementString``: node positions and velocities, eqs 11-14 of Poth et al.
+  The end node carries the end mass m_s only (the paper's lumping).
+* ``NaturalTangentString``: strain eps and Cartesian unit tangent t at the nodes
+  s_i = i l / k, i = 0..k (eqs 15-23), 2D or 3D; the unit-length constraint is
+  stabilised (Baumgarte) so it cannot drift.
+* ``NaturalAngleString``: strain eps and tangent angle phi (2D), t = (sin phi, -cos phi).
+
+State layout is node-major (one row per node) so that the Jacobian of every model is
+block-banded, which the linear algebra of the implicit solvers can exploit.
+"""
+
+import abc
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._effects import Kinematics, apply_laws, elastic_strain, split_effects, total_loads
+from ._geometry import direction, safe_norm
+from ._validate import check_int, check_positive
+
+
+def _param():
+    return eqx.field(converter=lambda x: jnp.asarray(x, dtype=jnp.float64))
+
+
+class AbstractString(eqx.Module):
+    """A string of unstrained length `l` with an end mass, hanging from a fixed pivot.
+
+    **Fields:** `l` (m), `mu` (kg/m), `m_s` (kg), `EA` (N) are differentiable
+    parameters; `k` (number of elements) and `dim` (2 or 3) are structure.
+    """
+
+    l: eqx.AbstractVar[Float[Array, ""]]
+    mu: eqx.AbstractVar[Float[Array, ""]]
+    m_s: eqx.AbstractVar[Float[Array, ""]]
+    EA: eqx.AbstractVar[Float[Array, ""]]
+    k: eqx.AbstractVar[int]
+    dim: eqx.AbstractVar[int]
+    formulation: ClassVar[str]
+
+    @abc.abstractmethod
+    def initial_state(self, theta0) -> Array:
+        """Straight, unstrained string at rest, at angle `theta0` (rad) from the
+        downward vertical towards +x."""
+
+    @abc.abstractmethod
+    def kinematics(self, y) -> Kinematics:
+        """Positions and velocities of the nodes, pivot included: `(k + 1, dim)`."""
+
+    @abc.abstractmethod
+    def strain(self, y) -> tuple[Array, Array]:
+        """Return (strain, strain rate) at the points where tension is defined."""
+
+    @abc.abstractmethod
+    def node_masses(self) -> Array:
+        """Mass lumped at each node (pivot included, end mass included), kg."""
+
+    @abc.abstractmethod
+    def vector_field(self, t, y, effects) -> Array:
+        """dy/dt of the state `y` at time `t` (s) under `effects`."""
+
+    @abc.abstractmethod
+    def elastic_energy(self, y, effects) -> Array:
+        """Elastic energy stored in the string, J."""
+
+    @abc.abstractmethod
+    def constraint_error(self, y) -> Array:
+        """Largest violation of the model's kinematic constraint (0 if it has none)."""
+
+    @abc.abstractmethod
+    def tension_weights(self) -> Array:
+        """Unstrained length each tension point stands for (quadrature weights), m."""
+
+
+def _check_string(model) -> None:
+    check_positive("l", model.l, "m")
+    check_positive("mu", model.mu, "kg/m")
+    check_positive("m_s", model.m_s, "kg")
+    check_positive("EA", model.EA, "N")
+    check_int("k", model.k, 2)
+    if model.dim not in (2, 3):
+        raise ValueError(f"`dim` must be 2 or 3; got {model.dim!r}.")
+
+
+def tension(model: AbstractString, y, effects) -> Array:
+    """Axial force at the model's tension points (elements or nodes), N."""
+    _, laws = split_effects(effects)
+    eps, eps_dot = model.strain(y)
+    return apply_laws(laws, model.EA, eps, eps_dot)
+
+
+def energy(model: AbstractString, y, effects) -> Array:
+    """Total mechanical energy (kinetic + elastic + potentials of the loads), J."""
+    loads, _ = split_effects(effects)
+    kin = model.kinematics(y)
+    kinetic = 0.5 * jnp.sum(model.node_masses() * jnp.sum(kin.velocities**2, -1))
+    potential = sum((e.potential(kin, model) for e in loads), jnp.zeros(()))
+    return kinetic + model.elastic_energy(y, effects) + potential
+
+
+def _trapezoid_weights(l, k):
+    w = jnp.full((k + 1,), l / k)
+    return w.at[0].set(0.5 * l / k).at[-1].set(0.5 * l / k)
+
+
+def _cumtrapz_nodes(f, h):
+    """Cumulative trapezoid integral of nodal values f (k+1, d) from node 0."""
+    seg = 0.5 * h * (f[1:] + f[:-1])
+    return jnp.concatenate([jnp.zeros_like(f[:1]), jnp.cumsum(seg, axis=0)], axis=0)
+
+
+class DisplacementString(AbstractString):
+    """String in displacement variables (Poth et al. eqs 11-14).
+
+    State `y`: shape `(k, 2 dim)`, row i-1 = (r_i, r_i') for nodes i = 1..k (m, m/s).
+    Tension is defined on the k elements.
+    """
+
+    l: Float[Array, ""] = _param()
+    mu: Float[Array, ""] = _param()
+    m_s: Float[Array, ""] = _param()
+    EA: Float[Array, ""] = _param()
+    k: int = eqx.field(static=True)
+    dim: int = eqx.field(static=True, default=2)
+    formulation: ClassVar[str] = "displacement"
+
+    def __check_init__(self):
+        _check_string(self)
+
+    def initial_state(self, theta0):
+        s = jnp.arange(1, self.k + 1) * (self.l / self.k)
+        r = s[:, None] * direction(theta0, self.dim)[None, :]
+        return jnp.concatenate([r, jnp.zeros_like(r)], axis=1)
+
+    def kinematics(self, y):
+        zero = jnp.zeros((1, self.dim), y.dtype)
+        r = jnp.concatenate([zero, y[:, : self.dim]], axis=0)
+        v = jnp.concatenate([zero, y[:, self.dim :]], axis=0)
+        return Kinematics(positions=r, velocities=v)
+
+    def _elements(self, kin):
+        h = self.l / self.k
+        d = jnp.diff(kin.positions, axis=0) / h  # D+ r, one row per element
+        dv = jnp.diff(kin.velocities, axis=0) / h
+        stretch = safe_norm(d)
+        safe = jnp.where(stretch > 0, stretch, 1.0)
+        t = d / safe[:, None]
+        eps_dot = jnp.sum(dv * d, -1) / safe
+        return stretch - 1.0, eps_dot, t
+
+    def strain(self, y):
+        eps, eps_dot, _ = self._elements(self.kinematics(y))
+        return eps, eps_dot
+
+    def node_masses(self):
+        m = jnp.full((self.k + 1,), self.mu * self.l / self.k)
+        return m.at[0].set(0.0).at[-1].set(self.m_s)
+
+    def tension_weights(self):
+        return jnp.full((self.k,), self.l / self.k)
+
+    def vector_field(self, t, y, effects):
+        loads, laws = split_effects(effects)
+        kin = self.kinematics(y)
+        eps, eps_dot, tangent = self._elements(kin)
+        N = apply_laws(laws, self.EA, eps, eps_dot)
+        Nt = N[:, None] * tangent  # force of element e on node e+1 is -Nt[e]
+        # Interior nodes 1..k-1: (k/(mu l)) (N+ t+ - N- t-) (eq 14).
+        acc_int = (Nt[1:] - Nt[:-1]) * (self.k / (self.mu * self.l))
+        acc_end = -Nt[-1] / self.m_s  # eq 4
+        if loads:
+            f = total_loads(loads, t, kin, self)
+            acc_int = acc_int + f.line[1:-1] / self.mu
+            acc_end = acc_end + f.end / self.m_s
+        acc = jnp.concatenate([acc_int, acc_end[None, :]], axis=0)
+        return jnp.concatenate([y[:, self.dim :], acc], axis=1)
+
+    def elastic_energy(self, y, effects):
+        _, laws = split_effects(effects)
+        eps, _ = self.strain(y)
+        e = elastic_strain(laws, eps)
+        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
+
+    def constraint_error(self, y):
+        return jnp.zeros((), y.dtype)
+
+
+def _apply_minv_neg(z, k, l, a):
+    """x = -M^{-1} z with the tridiagonal M^{-1} of eq 17.
+
+    The last diagonal entry is 2 (1 + 1/a) k^2/l^2 with a = k m_s/(mu l): the paper
+    prints 2(a + 1), which contradicts its own eq 19 (and its units); this value is
+    the exact inverse of its M and reproduces eq 19.
+    """
+    c = (k / l) ** 2
+    x0 = -c * (2 * z[0] - 2 * z[1])
+    xi = -c * (-z[:-2] + 2 * z[1:-1] - z[2:])
+    xk = -c * (-2 * z[-2] + 2 * (1 + 1 / a) * z[-1])
+    return jnp.concatenate([x0[None], xi, xk[None]], axis=0)
+
+
+def _natural_x(model, t, kin, tangent, N, loads):
+    """Second time derivative x_i = [(1 + eps_i) t_i]'' from eqs 15-19.
+
+    External loads generalise the gravity term of z: z_i = (N_i t_i - F_i)/mu with
+    F_i the external force on the piece [s_i, l] plus the end mass (trapezoid rule
+    on each element), which for gravity is exactly (m_s + mu (l - s_i)) g.
+    """
+    h = model.l / model.k
+    z = N[:, None] * tangent
+    if loads:
+        f = total_loads(loads, t, kin, model)
+        seg = 0.5 * h * (f.line[1:] + f.line[:-1])
+        tail = jnp.concatenate(
+            [jnp.cumsum(seg[::-1], axis=0)[::-1], jnp.zeros_like(seg[:1])], axis=0
+        )
+        z = z - (tail + f.end[None, :])
+    z = z / model.mu
+    a = model.k * model.m_s / (model.mu * model.l)
+    return _apply_minv_neg(z, model.k, model.l, a)
+
+
+class NaturalTangentString(AbstractString):
+    """String in natural variables: strain eps and Cartesian tangent t (eqs 15-23).
+
+    State `y`: shape `(k + 1, 2 + 2 dim)`, row i = (eps_i, t_i, eps_i', t_i') at node
+    s_i = i l/k. Positions follow from r(s) = int_0^s (1 + eps) t ds (trapezoid rule).
+    The constraint |t| = 1 is enforced through its second derivative (eqs 21-23) with
+    Baumgarte stabilisation c'' + 2 w c' + w^2 c = 0, c = (|t|^2 - 1)/2, at the rate
+    w = sqrt(EA/mu) k/l of the axial waves: no new time scale, and drift decays.
+    """
+
+    l: Float[Array, ""] = _param()
+    mu: Float[Array, ""] = _param()
+    m_s: Float[Array, ""] = _param()
+    EA: Float[Array, ""] = _param()
+    k: int = eqx.field(static=True)
+    dim: int = eqx.field(static=True, default=2)
+    formulation: ClassVar[str] = "natural"
+
+    def __check_init__(self):
+        _check_string(self)
+
+    def _split(self, y):
+        d = self.dim
+        return y[:, 0], y[:, 1 : 1 + d], y[:, 1 + d], y[:, 2 + d :]
+
+    def initial_state(self, theta0):
+        n = self.k + 1
+        t = jnp.broadcast_to(direction(theta0, self.dim), (n, self.dim))
+        z1 = jnp.zeros((n, 1))
+        return jnp.concatenate([z1, t, z1, jnp.zeros((n, self.dim))], axis=1)
+
+    def kinematics(self, y):
+        eps, t, eps_dot, t_dot = self._split(y)
+        h = self.l / self.k
+        r_s = (1 + eps)[:, None] * t
+        v_s = eps_dot[:, None] * t + (1 + eps)[:, None] * t_dot
+        return Kinematics(_cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h))
+
+    def strain(self, y):
+        eps, _, eps_dot, _ = self._split(y)
+        return eps, eps_dot
+
+    def node_masses(self):
+        m = self.mu * _trapezoid_weights(self.l, self.k)
+        return m.at[-1].add(self.m_s)
+
+    def tension_weights(self):
+        return _trapezoid_weights(self.l, self.k)
+
+    def vector_field(self, t, y, effects):
+        loads, laws = split_effects(effects)
+        eps, tan, eps_dot, tan_dot = self._split(y)
+        kin = self.kinematics(y) if loads else None
+        N = apply_laws(laws, self.EA, eps, eps_dot)
+        x = _natural_x(self, t, kin, tan, N, loads)
+        # Solve eq 22 for (t'', eps'') with a stabilised constraint row:
+        # (1+eps) t'' + eps'' t = x - 2 eps' t' =: b1,
+        # t . t'' = -|t'|^2 - 2 w c' - w^2 c =: b2.
+        w = jnp.sqrt(self.EA / self.mu) * (self.k / self.l)
+        c = 0.5 * (jnp.sum(tan * tan, -1) - 1.0)
+        c_dot = jnp.sum(tan * tan_dot, -1)
+        b1 = x - 2 * eps_dot[:, None] * tan_dot
+        b2 = -jnp.sum(tan_dot * tan_dot, -1) - 2 * w * c_dot - w**2 * c
+        one_eps = 1 + eps
+        tt = jnp.sum(tan * tan, -1)
+        eps_dd = (jnp.sum(tan * b1, -1) - one_eps * b2) / tt
+        tan_dd = (b1 - eps_dd[:, None] * tan) / one_eps[:, None]
+        return jnp.concatenate(
+            [eps_dot[:, None], tan_dot, eps_dd[:, None], tan_dd], axis=1
+        )
+
+    def elastic_energy(self, y, effects):
+        _, laws = split_effects(effects)
+        eps, _ = self.strain(y)
+        e = elastic_strain(laws, eps)
+        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
+
+    def constraint_error(self, y):
+        _, t, _, _ = self._split(y)
+        return jnp.max(jnp.abs(safe_norm(t) - 1.0))
+
+
+class NaturalAngleString(AbstractString):
+    """String in natural variables: strain eps and tangent angle phi (2D).
+
+    State `y`: shape `(k + 1, 4)`, row i = (eps_i, phi_i, eps_i', phi_i'), with
+    t = (sin phi, -cos phi) (phi from the downward vertical) and n = dt/dphi:
+    eps'' - (1 + eps) phi'^2 = x . t and (1 + eps) phi'' + 2 eps' phi' = x . n.
+    The unit-length constraint holds by construction.
+    """
+
+    l: Float[Array, ""] = _param()
+    mu: Float[Array, ""] = _param()
+    m_s: Float[Array, ""] = _param()
+    EA: Float[Array, ""] = _param()
+    k: int = eqx.field(static=True)
+    dim: int = eqx.field(static=True, default=2)
+    formulation: ClassVar[str] = "angle"
+
+    def __check_init__(self):
+        _check_string(self)
+        if self.dim != 2:
+            raise ValueError(
+                "`dim` must be 2 for the angle formulation; use formulation="
+                f"'natural' for 3D (got dim={self.dim!r})."
+            )
+
+    def initial_state(self, theta0):
+        n = self.k + 1
+        z = jnp.zeros((n,))
+        phi = jnp.full((n,), theta0, dtype=jnp.float64)
+        return jnp.stack([z, phi, z, z], axis=1)
+
+    def _tn(self, phi):
+        s, c = jnp.sin(phi), jnp.cos(phi)
+        return jnp.stack([s, -c], -1), jnp.stack([c, s], -1)
+
+    def kinematics(self, y):
+        eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
+        t, n = self._tn(phi)
+        h = self.l / self.k
+        r_s = (1 + eps)[:, None] * t
+        v_s = eps_dot[:, None] * t + ((1 + eps) * phi_dot)[:, None] * n
+        return Kinematics(_cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h))
+
+    def strain(self, y):
+        return y[:, 0], y[:, 2]
+
+    def node_masses(self):
+        m = self.mu * _trapezoid_weights(self.l, self.k)
+        return m.at[-1].add(self.m_s)
+
+    def tension_weights(self):
+        return _trapezoid_weights(self.l, self.k)
+
+    def vector_field(self, t, y, effects):
+        loads, laws = split_effects(effects)
+        eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
+        tan, nrm = self._tn(phi)
+        kin = self.kinematics(y) if loads else None
+        N = apply_laws(laws, self.EA, eps, eps_dot)
+        x = _natural_x(self, t, kin, tan, N, loads)
+        eps_dd = jnp.sum(x * tan, -1) + (1 + eps) * phi_dot**2
+        phi_dd = (jnp.sum(x * nrm, -1) - 2 * eps_dot * phi_dot) / (1 + eps)
+        return jnp.stack([eps_dot, phi_dot, eps_dd, phi_dd], axis=1)
+
+    def elastic_energy(self, y, effects):
+        _, laws = split_effects(effects)
+        eps, _ = self.strain(y)
+        e = elastic_strain(laws, eps)
+        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
+
+    def constraint_error(self, y):
+        return jnp.zeros((), y.dtype)
+
+
+FORMULATIONS = {
+    "displacement": DisplacementString,
+    "natural": NaturalTangentString,
+    "angle": NaturalAngleString,
+}
