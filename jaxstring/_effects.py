@@ -66,8 +66,9 @@ class AbstractLoad(AbstractEffect):
         """Return the loads at time `t` (s) for kinematics `kin` of `model`."""
 
     @abc.abstractmethod
-    def potential(self, kin: Kinematics, model) -> Float[Array, ""]:
-        """Return the potential energy of the load (J); 0 for a non-conservative one."""
+    def potential(self, y, kin: Kinematics, model) -> Float[Array, ""]:
+        """Return the potential energy of the load (J) in state `y` (with kinematics
+        `kin`); 0 for a non-conservative load."""
 
 
 class AbstractTensionLaw(AbstractEffect):
@@ -103,11 +104,11 @@ class Gravity(AbstractLoad):
         line = jnp.broadcast_to(model.mu * gvec, kin.positions.shape)
         return Loads(line=line, end=model.m_s * gvec)
 
-    def potential(self, kin, model):
-        # V = -sum m_i g . r_i with the model's own mass lumping.
-        gvec = self.g * down(kin.positions.shape[-1])
-        masses = model.node_masses()
-        return -jnp.sum(masses * (kin.positions @ gvec))
+    def potential(self, y, kin, model):
+        # Gravity is a constant load: its potential is minus its work in the
+        # model's own generalised coordinates (so that energy balances hold exactly
+        # for each discretisation).
+        return model.constant_load_potential(y, self.loads(0.0, kin, model))
 
 
 class KelvinVoigt(AbstractTensionLaw):

@@ -134,13 +134,8 @@ class StageNewton(optx.AbstractRootFinder):
     def step(self, fn, y, args, options, state, tags):
         del options
         if self.newton:
-            # Full Newton: a fresh Jacobian at the current iterate (the first
-            # iteration reuses the one the solver already built at y).
-            linear_state = lax.cond(
-                state.step == 0,
-                lambda: state.linear_state,
-                lambda: self._factor(fn, y, args, tags),
-            )
+            # Full Newton: a fresh Jacobian at the current iterate.
+            linear_state = self._factor(fn, y, args, tags)
         else:
             linear_state = state.linear_state
         fx, aux = fn(y, args)
@@ -157,12 +152,14 @@ class StageNewton(optx.AbstractRootFinder):
             )
             diffsize = self.norm(scaled)
         new_state = _StageState(
-            linear_state=linear_state,
+            # (the loop state keeps the initial factorisation: a fresh one has a
+            # different static structure; full Newton rebuilds it every iteration)
+            linear_state=state.linear_state,
             diffsize=jnp.asarray(diffsize, dtype=state.diffsize.dtype),
             diffsize_prev=state.diffsize,
             result=optx.RESULTS.promote(sol.result),
             step=state.step + 1,
-            n_jac=state.n_jac + (state.step > 0) * int(self.newton),
+            n_jac=state.n_jac + int(self.newton),
         )
         return new_y, new_state, aux
 

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
 from ._solvers import build_solver, check_solver, is_adaptive
 from ._trajectory import Trajectory
@@ -33,9 +34,15 @@ def observables(scene: Scene, ys):
 
 @eqx.filter_jit
 def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptive,
-           max_steps, progress):
+           max_steps, progress, project):
     term = dfx.ODETerm(scene_vector_field)
     dfx_solver = build_solver(solver, newton_rtol, newton_atol)
+    project = getattr(scene.model, "project", None) if project else None
+    if project is not None:
+        dfx_solver = ProjectedSolver(dfx_solver, project)
+        saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: project(y))
+    else:
+        saveat = dfx.SaveAt(ts=ts)
     if adaptive:
         controller = dfx.PIDController(rtol=rtol, atol=atol)
     else:
@@ -51,7 +58,7 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
         dt0=dt0,
         y0=scene.y0,
         args=scene,
-        saveat=dfx.SaveAt(ts=ts),
+        saveat=saveat,
         stepsize_controller=controller,
         max_steps=max_steps,
         throw=False,
@@ -103,6 +110,7 @@ def simulate(
     newton_atol=None,
     max_steps: int = 200_000,
     progress: bool = False,
+    project: bool = True,
 ) -> Trajectory:
     """Integrate a scene and return its Trajectory.
 
@@ -120,6 +128,9 @@ def simulate(
       (default: `rtol`, `atol`).
     - `max_steps`: limit on the number of steps.
     - `progress`: print a text progress meter.
+    - `project`: for models with a constraint manifold (the Cartesian-tangent
+      string), project the state onto it after every step and at the save times
+      (default True); False integrates the raw constrained equations, to show drift.
 
     Implicit solvers build the Newton matrix from an autodiff (forward-mode)
     Jacobian of the vector field. A failed solve does not raise: the returned
@@ -155,5 +166,5 @@ def simulate(
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
     return _solve(
         scene, ts, f64(rtol), f64(atol), dt0, f64(nr), f64(na), solver, adaptive,
-        max_steps, progress,
+        max_steps, progress, bool(project),
     )

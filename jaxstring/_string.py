@@ -74,6 +74,14 @@ class AbstractString(eqx.Module):
         """Largest violation of the model's kinematic constraint (0 if it has none)."""
 
     @abc.abstractmethod
+    def kinetic_energy(self, y) -> Array:
+        """Kinetic energy of string and end mass, J."""
+
+    @abc.abstractmethod
+    def constant_load_potential(self, y, loads) -> Array:
+        """Potential energy of position-independent loads (minus their work), J."""
+
+    @abc.abstractmethod
     def tension_weights(self) -> Array:
         """Unstrained length each tension point stands for (quadrature weights), m."""
 
@@ -98,10 +106,9 @@ def tension(model: AbstractString, y, effects) -> Array:
 def energy(model: AbstractString, y, effects) -> Array:
     """Total mechanical energy (kinetic + elastic + potentials of the loads), J."""
     loads, _ = split_effects(effects)
-    kin = model.kinematics(y)
-    kinetic = 0.5 * jnp.sum(model.node_masses() * jnp.sum(kin.velocities**2, -1))
-    potential = sum((e.potential(kin, model) for e in loads), jnp.zeros(()))
-    return kinetic + model.elastic_energy(y, effects) + potential
+    kin = model.kinematics(y) if loads else None
+    potential = sum((e.potential(y, kin, model) for e in loads), jnp.zeros(()))
+    return model.kinetic_energy(y) + model.elastic_energy(y, effects) + potential
 
 
 def _trapezoid_weights(l, k):
@@ -190,6 +197,17 @@ class DisplacementString(AbstractString):
     def constraint_error(self, y):
         return jnp.zeros((), y.dtype)
 
+    def kinetic_energy(self, y):
+        v = self.kinematics(y).velocities
+        return 0.5 * jnp.sum(self.node_masses() * jnp.sum(v**2, -1))
+
+    def constant_load_potential(self, y, loads):
+        # Work coordinates of the lumped model: the interior nodes carry the line
+        # load of one element, the end node the end force (eq 14 and eq 4).
+        r = self.kinematics(y).positions
+        h = self.l / self.k
+        return -(h * jnp.sum(loads.line[1:-1] * r[1:-1]) + jnp.sum(loads.end * r[-1]))
+
 
 def _apply_minv_neg(z, k, l, a):
     """x = -M^{-1} z with the tridiagonal M^{-1} of eq 17.
@@ -205,6 +223,39 @@ def _apply_minv_neg(z, k, l, a):
     return jnp.concatenate([x0[None], xi, xk[None]], axis=0)
 
 
+def _tail_forces(model, loads):
+    """External force on the piece [s_i, l] plus the end mass, per node, N."""
+    h = model.l / model.k
+    seg = 0.5 * h * (loads.line[1:] + loads.line[:-1])
+    tail = jnp.concatenate(
+        [jnp.cumsum(seg[::-1], axis=0)[::-1], jnp.zeros_like(seg[:1])], axis=0
+    )
+    return tail + loads.end[None, :]
+
+
+def _natural_kinetic_energy(model, q_dot):
+    """Kinetic energy that the natural-variable discretisation conserves.
+
+    Multiplying M x + z = 0 by the trapezoid weights C gives the symmetric mass
+    matrix mu C G C (G the Green's matrix of eq 10), so the conserved kinetic energy
+    is mu/2 sum_ij w_i w_j G_ij q_i' . q_j' with q = (1 + eps) t. Written with the
+    partial sums Q_m = sum_{i <= m} w_i q_i': mu h/2 sum_{m<k} |Q_m|^2 + m_s/2 |Q_k|^2
+    (O(k); Q_k is the end-mass velocity).
+    """
+    w = _trapezoid_weights(model.l, model.k)
+    Q = jnp.cumsum(w[:, None] * q_dot, axis=0)
+    h = model.l / model.k
+    return 0.5 * model.mu * h * jnp.sum(Q[:-1] ** 2) + 0.5 * model.m_s * jnp.sum(
+        Q[-1] ** 2
+    )
+
+
+def _natural_load_potential(model, q, loads):
+    """Potential of constant loads consistent with eq 10: -sum_i w_i F_i . q_i."""
+    w = _trapezoid_weights(model.l, model.k)
+    return -jnp.sum(w[:, None] * _tail_forces(model, loads) * q)
+
+
 def _natural_x(model, t, kin, tangent, N, loads):
     """Second time derivative x_i = [(1 + eps_i) t_i]'' from eqs 15-19.
 
@@ -212,15 +263,9 @@ def _natural_x(model, t, kin, tangent, N, loads):
     F_i the external force on the piece [s_i, l] plus the end mass (trapezoid rule
     on each element), which for gravity is exactly (m_s + mu (l - s_i)) g.
     """
-    h = model.l / model.k
     z = N[:, None] * tangent
     if loads:
-        f = total_loads(loads, t, kin, model)
-        seg = 0.5 * h * (f.line[1:] + f.line[:-1])
-        tail = jnp.concatenate(
-            [jnp.cumsum(seg[::-1], axis=0)[::-1], jnp.zeros_like(seg[:1])], axis=0
-        )
-        z = z - (tail + f.end[None, :])
+        z = z - _tail_forces(model, total_loads(loads, t, kin, model))
     z = z / model.mu
     a = model.k * model.m_s / (model.mu * model.l)
     return _apply_minv_neg(z, model.k, model.l, a)
@@ -281,14 +326,10 @@ class NaturalTangentString(AbstractString):
         kin = self.kinematics(y) if loads else None
         N = apply_laws(laws, self.EA, eps, eps_dot)
         x = _natural_x(self, t, kin, tan, N, loads)
-        # Solve eq 22 for (t'', eps'') with a stabilised constraint row:
-        # (1+eps) t'' + eps'' t = x - 2 eps' t' =: b1,
-        # t . t'' = -|t'|^2 - 2 w c' - w^2 c =: b2.
-        w = jnp.sqrt(self.EA / self.mu) * (self.k / self.l)
-        c = 0.5 * (jnp.sum(tan * tan, -1) - 1.0)
-        c_dot = jnp.sum(tan * tan_dot, -1)
+        # Solve eq 22 for (t'', eps''), for any |t| (eq 23 assumes |t| = 1):
+        # (1+eps) t'' + eps'' t = x - 2 eps' t' =: b1,   t . t'' = -|t'|^2 =: b2.
         b1 = x - 2 * eps_dot[:, None] * tan_dot
-        b2 = -jnp.sum(tan_dot * tan_dot, -1) - 2 * w * c_dot - w**2 * c
+        b2 = -jnp.sum(tan_dot * tan_dot, -1)
         one_eps = 1 + eps
         tt = jnp.sum(tan * tan, -1)
         eps_dd = (jnp.sum(tan * b1, -1) - one_eps * b2) / tt
@@ -306,6 +347,22 @@ class NaturalTangentString(AbstractString):
     def constraint_error(self, y):
         _, t, _, _ = self._split(y)
         return jnp.max(jnp.abs(safe_norm(t) - 1.0))
+
+    def project(self, y):
+        """Nearest state with |t| = 1 and t . t' = 0 (node by node)."""
+        eps, t, eps_dot, t_dot = self._split(y)
+        t = t / safe_norm(t, keepdims=True)
+        t_dot = t_dot - jnp.sum(t_dot * t, -1, keepdims=True) * t
+        return jnp.concatenate([eps[:, None], t, eps_dot[:, None], t_dot], axis=1)
+
+    def kinetic_energy(self, y):
+        eps, t, eps_dot, t_dot = self._split(y)
+        q_dot = eps_dot[:, None] * t + (1 + eps)[:, None] * t_dot
+        return _natural_kinetic_energy(self, q_dot)
+
+    def constant_load_potential(self, y, loads):
+        eps, t, _, _ = self._split(y)
+        return _natural_load_potential(self, (1 + eps)[:, None] * t, loads)
 
 
 class NaturalAngleString(AbstractString):
@@ -380,6 +437,16 @@ class NaturalAngleString(AbstractString):
 
     def constraint_error(self, y):
         return jnp.zeros((), y.dtype)
+
+    def kinetic_energy(self, y):
+        eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
+        t, n = self._tn(phi)
+        q_dot = eps_dot[:, None] * t + ((1 + eps) * phi_dot)[:, None] * n
+        return _natural_kinetic_energy(self, q_dot)
+
+    def constant_load_potential(self, y, loads):
+        t, _ = self._tn(y[:, 1])
+        return _natural_load_potential(self, (1 + y[:, 0])[:, None] * t, loads)
 
 
 FORMULATIONS = {

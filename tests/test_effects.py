@@ -1,0 +1,99 @@
+"""Effects: each one is what its formula says; a left-out effect costs nothing."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxstring as js
+
+from .helpers import FORMULATIONS
+
+
+def _count_eqns(jaxpr) -> int:
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += 1
+        for sub in jax.core.jaxprs_in_params(eqn.params):
+            n += _count_eqns(sub)
+    return n
+
+
+def _vf_eqns(scene):
+    jaxpr = jax.make_jaxpr(scene.vector_field)(0.0, scene.y0).jaxpr
+    return _count_eqns(jaxpr)
+
+
+def _swinging_state(scene):
+    """A generic state: released, then 0.05 s of motion (strained, moving)."""
+    traj = js.simulate(scene, rtol=1e-8, atol=1e-8, ts=jnp.array([0.0, 0.05]))
+    return traj.ys[-1]
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_left_out_effect_is_not_computed_and_changes_nothing_else(formulation):
+    kw = dict(formulation=formulation, k=6, EA=1e4, t1=0.1)
+    full = js.scenes.string_pendulum(
+        effects=("gravity", "kelvin_voigt", "slack"), alpha=0.0, g=0.0, **kw
+    )
+    y = _swinging_state(js.scenes.string_pendulum(**kw))
+    n_full = _vf_eqns(full)
+    f_full = full.vector_field(0.0, y)
+    for left_out in ("gravity", "kelvin_voigt", "slack"):
+        names = tuple(e for e in ("gravity", "kelvin_voigt", "slack") if e != left_out)
+        part = js.scenes.string_pendulum(effects=names, alpha=0.0, g=0.0, **kw)
+        # Fewer operations in the compiled vector field ...
+        assert _vf_eqns(part) < n_full, left_out
+        # ... and, where the effect had no influence (g = 0, alpha = 0, taut
+        # string), exactly the same vector field.
+        np.testing.assert_array_equal(part.vector_field(0.0, y), f_full)
+    bare = js.scenes.string_pendulum(effects=(), **kw)
+    assert _vf_eqns(bare) < min(
+        _vf_eqns(js.scenes.string_pendulum(effects=(e,), **kw))
+        for e in ("gravity", "kelvin_voigt", "slack")
+    )
+
+
+def test_gravity_is_uniform_acceleration_at_release():
+    # Straight, unstrained, at rest: no tension, so every mass falls with g.
+    scene = js.scenes.string_pendulum(formulation="displacement", k=8, t1=0.1)
+    dy = scene.vector_field(0.0, scene.y0)
+    np.testing.assert_allclose(dy[:, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(dy[:, 3], -9.81, rtol=1e-12)
+
+
+def test_kelvin_voigt_and_slack_laws():
+    kv = js.KelvinVoigt(alpha=0.02)
+    eps = jnp.array([0.01, -0.01, 0.002])
+    eps_dot = jnp.array([0.5, 0.1, -1.0])
+    EA = 1e4
+    np.testing.assert_allclose(
+        kv.tension(EA * eps, eps, eps_dot, EA), EA * (eps + 0.02 * eps_dot)
+    )
+    slack = js.Slack()
+    N = kv.tension(EA * eps, eps, eps_dot, EA)  # [150, -80, 0.0 - 180] N
+    out = slack.tension(N, eps, eps_dot, EA)
+    # Taut and pulling: unchanged; compressed: zero; taut but "pushing": zero.
+    np.testing.assert_allclose(out, [float(N[0]), 0.0, 0.0])
+    np.testing.assert_allclose(slack.elastic_strain(eps), [0.01, 0.0, 0.002])
+
+
+def test_slack_string_has_zero_tension_where_compressed():
+    scene = js.scenes.string_pendulum(
+        formulation="displacement", k=6, effects=("gravity", "slack"), t1=0.1
+    )
+    y = np.array(scene.y0)
+    y[:, :2] *= 0.9  # uniformly compressed by 10 %
+    np.testing.assert_array_equal(scene.tension(jnp.asarray(y)), 0.0)
+    y[:, :2] *= 1.01 / 0.9  # stretched by 1 %
+    np.testing.assert_allclose(scene.tension(jnp.asarray(y)), 1e6 * 0.01, rtol=1e-9)
+
+
+def test_same_structure_does_not_recompile_for_new_parameter_values():
+    from jaxstring import _simulate
+
+    before = _simulate._solve._cached._cache_size()
+    for EA, alpha in ((1e4, 0.01), (2e4, 0.0), (3e4, 0.05)):
+        scene = js.scenes.string_pendulum(k=5, EA=EA, alpha=alpha, t1=0.05)
+        assert js.simulate(scene, ts=jnp.linspace(0, 0.05, 3)).ok
+    assert _simulate._solve._cached._cache_size() - before <= 1

@@ -1,0 +1,85 @@
+"""Solvers by name, the fixed-step paper setting, failure reporting, stage Newton."""
+
+import diffrax as dfx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxstring as js
+
+from .helpers import fitted_order, run
+
+
+def _err(traj, ref):
+    return float(np.max(np.linalg.norm(traj.end_mass - ref.end_mass, axis=1)))
+
+
+@pytest.mark.parametrize(
+    "solver, tol",
+    [
+        ("kvaerno3", 1e-5),
+        ("kvaerno4", 1e-5),
+        ("implicit_euler", 1e-2),
+        ("tsit5", 1e-5),
+        ("dopri5", 1e-5),
+    ],
+)
+def test_adaptive_solvers_agree_with_reference(solver, tol):
+    # Soft string (explicit solvers need no more than a few thousand steps).
+    ref = run("displacement", k=6, EA=1e3, t1=0.5, n_save=51, rtol=1e-11, atol=1e-11)
+    traj = run("displacement", k=6, EA=1e3, t1=0.5, n_save=51, solver=solver,
+               rtol=1e-7, atol=1e-7)
+    assert traj.ok, traj.status
+    assert _err(traj, ref) < tol, _err(traj, ref)
+
+
+def test_fixed_step_implicit_euler_paper_setting_first_order():
+    # The paper's fixed step dt = 0.005 (400 steps over 2 s) must run, and the
+    # error must fall like dt.
+    scene = js.scenes.string_pendulum(k=10, EA=1e4, t1=0.4)
+    ts = jnp.linspace(0.0, 0.4, 5)
+    ref = js.simulate(scene, rtol=1e-11, atol=1e-11, ts=ts)
+    dts = (0.005, 0.0025, 0.00125)
+    errs = []
+    for dt in dts:
+        traj = js.simulate(scene, "implicit_euler_fixed", dt0=dt, rtol=1e-7,
+                           atol=1e-7, ts=ts)
+        assert traj.ok, traj.status
+        assert int(traj.stats["num_accepted_steps"]) == round(0.4 / dt)
+        errs.append(_err(traj, ref))
+    order = fitted_order(dts, errs)
+    assert 0.8 < order < 1.3, (order, errs)
+    paper = js.simulate(js.scenes.string_pendulum(k=10, EA=1e6, t1=2.0),
+                        "implicit_euler_fixed", dt0=0.005, rtol=1e-7, atol=1e-7)
+    assert paper.ok and int(paper.stats["num_accepted_steps"]) == 400
+
+
+def test_failed_solve_returns_status_and_data_up_to_failure():
+    # An explicit solver on a stiff string runs out of steps: no exception, a
+    # status message, the data up to the failure and NaN afterwards.
+    traj = run("displacement", k=10, EA=1e6, solver="tsit5", max_steps=300,
+               n_save=101, rtol=1e-6, atol=1e-6)
+    assert not traj.ok
+    assert "maximum number of solver steps" in traj.status
+    n = int(traj.n_valid)
+    assert 1 <= n < 101
+    assert np.all(np.isfinite(np.asarray(traj.positions[:n])))
+    assert np.all(np.isnan(np.asarray(traj.positions[n:])))
+    assert 0.0 <= float(traj.t_end) < 1.0
+
+
+def test_stage_newton_avoids_veryChord_early_divergence():
+    # diffrax 0.7.2's VeryChord declares divergence whenever Newton has not met its
+    # tolerance after two iterations, so it rejects many steps that a contracting
+    # iteration would have accepted. jaxstring's StageNewton keeps iterating.
+    scene = js.scenes.string_pendulum(k=6, EA=1e4, t1=0.5)
+    ts = jnp.linspace(0.0, 0.5, 11)
+    released = js.simulate(scene, dfx.Kvaerno5(), rtol=1e-6, atol=1e-6, ts=ts)
+    ours = js.simulate(scene, "kvaerno5", rtol=1e-6, atol=1e-6, ts=ts)
+    ref = js.simulate(scene, rtol=1e-11, atol=1e-11, ts=ts)
+    assert released.ok and ours.ok
+    rej_released = int(released.stats["num_rejected_steps"])
+    rej_ours = int(ours.stats["num_rejected_steps"])
+    assert rej_ours * 3 < rej_released, (rej_ours, rej_released)
+    assert int(ours.stats["num_steps"]) < int(released.stats["num_steps"])
+    assert _err(ours, ref) < 1e-4
