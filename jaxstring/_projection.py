@@ -10,16 +10,17 @@ part of dt/dt removed) -- the standard projection method for ODEs on manifolds
 estimate and dense output of the wrapped solver are kept as they are.
 """
 
-from collections.abc import Callable
-
 import diffrax as dfx
 
 
 class ProjectedSolver(dfx.AbstractAdaptiveSolver, dfx.AbstractWrappedSolver):
-    """Wrap `solver` and apply `project(y)` to the state at the end of every step."""
+    """Wrap `solver`; project the state at the end of every step.
+
+    The projection is the scene's `args.model.project`: the model travels in `args`
+    (never closed over), so its parameters stay differentiable.
+    """
 
     solver: dfx.AbstractSolver
-    project: Callable
 
     @property
     def term_structure(self):
@@ -55,7 +56,7 @@ class ProjectedSolver(dfx.AbstractAdaptiveSolver, dfx.AbstractWrappedSolver):
         y1, y_error, dense_info, solver_state, result = self.solver.step(
             terms, t0, t1, y0, args, solver_state, made_jump
         )
-        return self.project(y1), y_error, dense_info, solver_state, result
+        return args.model.project(y1), y_error, dense_info, solver_state, result
 
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)

@@ -6,7 +6,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._effects import AbstractEffect
-from ._string import AbstractString, energy, tension
+from ._model import AbstractModel
 from ._validate import check_finite, is_concrete
 
 
@@ -15,14 +15,14 @@ class Scene(eqx.Module):
 
     **Arguments:**
 
-    - `model`: the string (or later tether/vessel) model.
+    - `model`: any `AbstractModel` (string, tether, vessels).
     - `effects`: tuple of effect Modules. Only these are computed.
     - `y0`: initial state in the model's layout.
     - `t1`: end time, s (> t0). `t0`: start time, s.
     - `name`: a label for plots and the command line.
     """
 
-    model: AbstractString
+    model: AbstractModel
     effects: tuple[AbstractEffect, ...]
     y0: Float[Array, "..."]
     t1: Float[Array, ""] = eqx.field(converter=jnp.asarray)
@@ -38,7 +38,9 @@ class Scene(eqx.Module):
         if len(set(kinds)) != len(kinds):
             raise ValueError("`effects` names an effect twice.")
         check_finite("y0", self.y0)
-        expected = jnp.shape(self.model.initial_state(0.0))
+        if not isinstance(self.model, AbstractModel):
+            raise ValueError("`model` must be a jaxstring model (AbstractModel).")
+        expected = tuple(self.model.state_shape())
         if tuple(jnp.shape(self.y0)) != tuple(expected):
             raise ValueError(
                 f"`y0` has shape {jnp.shape(self.y0)}; the model needs {expected}."
@@ -54,11 +56,15 @@ class Scene(eqx.Module):
         """dy/dt of the state under the scene's effects."""
         return self.model.vector_field(t, y, self.effects)
 
+    def observables(self, y, t=0.0):
+        """Derived quantities of one state (see the model's `observables`)."""
+        return self.model.observables(t, y, self.effects)
+
     def tension(self, y):
-        return tension(self.model, y, self.effects)
+        return self.observables(y)["tension"]
 
     def energy(self, y):
-        return energy(self.model, y, self.effects)
+        return self.observables(y)["energy"]
 
     def has(self, kind: type) -> bool:
         """Whether the scene calls for an effect of this type."""

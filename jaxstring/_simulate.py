@@ -13,23 +13,9 @@ from ._trajectory import Trajectory
 from ._validate import check_int, check_positive, is_concrete
 
 
-def observables(scene: Scene, ys):
+def observables(scene: Scene, ts, ys):
     """Derived observables of saved states `ys` (leading axis: time)."""
-    model = scene.model
-
-    def one(y):
-        kin = model.kinematics(y)
-        eps, _ = model.strain(y)
-        return (
-            kin.positions,
-            kin.velocities,
-            scene.tension(y),
-            eps,
-            scene.energy(y),
-            model.constraint_error(y),
-        )
-
-    return jax.vmap(one)(ys)
+    return jax.vmap(lambda t, y: scene.model.observables(t, y, scene.effects))(ts, ys)
 
 
 @eqx.filter_jit
@@ -37,10 +23,9 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
            max_steps, progress, project):
     term = dfx.ODETerm(scene_vector_field)
     dfx_solver = build_solver(solver, newton_rtol, newton_atol)
-    project = getattr(scene.model, "project", None) if project else None
-    if project is not None:
-        dfx_solver = ProjectedSolver(dfx_solver, project)
-        saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: project(y))
+    if project and scene.model.projects:
+        dfx_solver = ProjectedSolver(dfx_solver)
+        saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))
     else:
         saveat = dfx.SaveAt(ts=ts)
     if adaptive:
@@ -70,7 +55,7 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
     finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
     n_valid = jnp.sum(jnp.cumprod(finite))
     safe_ys = jnp.where(finite.reshape((-1,) + (1,) * (ys.ndim - 1)), ys, scene.y0)
-    pos, vel, ten, eps, en, cerr = observables(scene, safe_ys)
+    obs = observables(scene, ts, safe_ys)
 
     def mask(x):
         m = finite.reshape((-1,) + (1,) * (x.ndim - 1))
@@ -84,12 +69,7 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
     return Trajectory(
         ts=ts,
         ys=ys,
-        positions=mask(pos),
-        velocities=mask(vel),
-        tension=mask(ten),
-        strain=mask(eps),
-        energy=mask(en),
-        constraint_error=mask(cerr),
+        obs=jax.tree_util.tree_map(mask, obs),
         result=sol.result,
         stats=stats,
         t_end=t_end,

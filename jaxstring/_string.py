@@ -22,6 +22,7 @@ from jaxtyping import Array, Float
 
 from ._effects import Kinematics, apply_laws, elastic_strain, split_effects, total_loads
 from ._geometry import direction, safe_norm
+from ._model import AbstractModel
 from ._validate import check_int, check_positive
 
 
@@ -29,7 +30,7 @@ def _param():
     return eqx.field(converter=lambda x: jnp.asarray(x, dtype=jnp.float64))
 
 
-class AbstractString(eqx.Module):
+class AbstractString(AbstractModel):
     """A string of unstrained length `l` with an end mass, hanging from a fixed pivot.
 
     **Fields:** `l` (m), `mu` (kg/m), `m_s` (kg), `EA` (N) are differentiable
@@ -43,6 +44,24 @@ class AbstractString(eqx.Module):
     k: eqx.AbstractVar[int]
     dim: eqx.AbstractVar[int]
     formulation: ClassVar[str]
+
+    def state_shape(self):
+        return jnp.shape(self.initial_state(0.0))
+
+    def observables(self, t, y, effects):
+        """Node positions and velocities (pivot included), tension and strain at the
+        tension points, total energy and constraint error."""
+        del t
+        kin = self.kinematics(y)
+        eps, _ = self.strain(y)
+        return {
+            "positions": kin.positions,
+            "velocities": kin.velocities,
+            "tension": tension(self, y, effects),
+            "strain": eps,
+            "energy": energy(self, y, effects),
+            "constraint_error": self.constraint_error(y),
+        }
 
     @abc.abstractmethod
     def initial_state(self, theta0) -> Array:
@@ -136,6 +155,7 @@ class DisplacementString(AbstractString):
     k: int = eqx.field(static=True)
     dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "displacement"
+    projects: ClassVar[bool] = False
 
     def __check_init__(self):
         _check_string(self)
@@ -196,6 +216,9 @@ class DisplacementString(AbstractString):
 
     def constraint_error(self, y):
         return jnp.zeros((), y.dtype)
+
+    def project(self, y):
+        return y
 
     def kinetic_energy(self, y):
         v = self.kinematics(y).velocities
@@ -288,6 +311,7 @@ class NaturalTangentString(AbstractString):
     k: int = eqx.field(static=True)
     dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "natural"
+    projects: ClassVar[bool] = True
 
     def __check_init__(self):
         _check_string(self)
@@ -381,6 +405,7 @@ class NaturalAngleString(AbstractString):
     k: int = eqx.field(static=True)
     dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "angle"
+    projects: ClassVar[bool] = False
 
     def __check_init__(self):
         _check_string(self)
@@ -437,6 +462,9 @@ class NaturalAngleString(AbstractString):
 
     def constraint_error(self, y):
         return jnp.zeros((), y.dtype)
+
+    def project(self, y):
+        return y
 
     def kinetic_energy(self, y):
         eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]

@@ -13,33 +13,34 @@ class Trajectory(eqx.Module):
 
     - `ts`: save times, shape `(T,)`, s.
     - `ys`: states in the model's layout, shape `(T, ...)`.
-    - `positions`: node positions, pivot included, shape `(T, k + 1, dim)`, m.
-    - `velocities`: node velocities, shape `(T, k + 1, dim)`, m/s.
-    - `tension`: axial force at the model's tension points (`k` elements in
-      displacement variables, `k + 1` nodes in natural variables), shape `(T, .)`, N.
-    - `strain`: axial strain at the same points, shape `(T, .)`.
-    - `energy`: total mechanical energy, shape `(T,)`, J.
-    - `constraint_error`: max | |t| - 1 | of the tangent constraint, shape `(T,)`.
-    - `result`: the diffrax result code; `status` and `message` describe it.
+    - `obs`: dict of observables with a leading time axis (the model's
+      `observables`); for strings also available as attributes:
+      `positions` and `velocities` (nodes incl. the pivot, `(T, k + 1, dim)`, m and
+      m/s), `tension` and `strain` at the tension points (`k` elements in
+      displacement variables, `k + 1` nodes in natural variables; N and -),
+      `energy` (`(T,)`, J) and `constraint_error` (`(T,)`, max | |t| - 1 |).
+    - `result`: the diffrax result code; `ok`, `status` describe it.
     - `stats`: solver statistics (`num_steps`, `num_accepted_steps`,
       `num_rejected_steps`, `max_steps`).
+    - `t_end`, `n_valid`: the last save time reached and the number of valid rows.
 
-    A failed solve keeps the data up to the failure; `ok` is False, and `t_end` is the
-    last time the solver reached.
+    A failed solve keeps the data up to the failure; later rows are NaN.
     """
 
     ts: Float[Array, " T"]
     ys: Array
-    positions: Float[Array, "T n dim"]
-    velocities: Float[Array, "T n dim"]
-    tension: Float[Array, "T m"]
-    strain: Float[Array, "T m"]
-    energy: Float[Array, " T"]
-    constraint_error: Float[Array, " T"]
+    obs: dict
     result: dfx.RESULTS
     stats: dict
     t_end: Float[Array, ""]
     n_valid: Int[Array, ""]
+
+    def __getattr__(self, name):
+        # Observables by attribute: traj.positions, traj.tension, ...
+        obs = self.__dict__.get("obs")
+        if obs is not None and name in obs:
+            return obs[name]
+        raise AttributeError(name)
 
     @property
     def ok(self) -> bool:
@@ -53,7 +54,7 @@ class Trajectory(eqx.Module):
     @property
     def end_mass(self) -> Float[Array, "T dim"]:
         """Position of the end mass (the last node), m."""
-        return self.positions[:, -1, :]
+        return self.obs["positions"][:, -1, :]
 
     def summary(self) -> str:
         s = self.stats

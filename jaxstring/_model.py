@@ -1,0 +1,43 @@
+"""The interface every jaxstring model implements (strings, tethers, vessels)."""
+
+import abc
+
+import equinox as eqx
+from jaxtyping import Array
+
+
+class AbstractModel(eqx.Module):
+    """A model: state layout, internal physics, and observables.
+
+    Array fields are physical parameters (differentiable, vmappable); static fields
+    are structure. Subclasses implement:
+
+    - `state_shape()`: the shape of the state array `y`.
+    - `vector_field(t, y, effects)`: dy/dt under the scene's effects.
+    - `observables(t, y, effects)`: a dict of derived quantities of one state
+      (e.g. `positions`, `tension`, `energy`), saved in the Trajectory.
+    - `project(y)`: the nearest state on the model's constraint manifold (identity
+      for unconstrained models); `simulate` applies it after every step when
+      `projects` is True.
+    """
+
+    @abc.abstractmethod
+    def state_shape(self) -> tuple[int, ...]:
+        """Shape of the state array."""
+
+    @abc.abstractmethod
+    def vector_field(self, t, y, effects) -> Array:
+        """dy/dt of state `y` at time `t` (s) under `effects`."""
+
+    @abc.abstractmethod
+    def observables(self, t, y, effects) -> dict:
+        """Derived quantities of one state, as a dict of arrays."""
+
+    @property
+    @abc.abstractmethod
+    def projects(self) -> bool:
+        """Whether `project` is a non-trivial projection to apply after each step."""
+
+    @abc.abstractmethod
+    def project(self, y) -> Array:
+        """The nearest state on the constraint manifold."""
