@@ -1,14 +1,16 @@
 """jaxstring: differentiable simulation of strings, tethers and vessels in JAX."""
 
-from . import _config  # noqa: F401  (x64 and BLAS threads, before anything else)
-from . import scenes as scenes
+from . import (
+    _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
+    scenes as scenes,
+)
 from ._effects import (
     AbstractEffect as AbstractEffect,
     AbstractLoad as AbstractLoad,
     AbstractTensionLaw as AbstractTensionLaw,
     Gravity as Gravity,
-    Kinematics as Kinematics,
     KelvinVoigt as KelvinVoigt,
+    Kinematics as Kinematics,
     Loads as Loads,
     Slack as Slack,
 )

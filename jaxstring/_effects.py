@@ -192,5 +192,3 @@ def elastic_strain(laws, eps):
     for law in laws:
         eps = law.elastic_strain(eps)
     return eps
-
-

@@ -19,8 +19,20 @@ def observables(scene: Scene, ts, ys):
 
 
 @eqx.filter_jit
-def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptive,
-           max_steps, progress, project):
+def _solve(
+    scene,
+    ts,
+    rtol,
+    atol,
+    dt0,
+    newton_rtol,
+    newton_atol,
+    solver,
+    adaptive,
+    max_steps,
+    progress,
+    project,
+):
     term = dfx.ODETerm(scene_vector_field)
     dfx_solver = build_solver(solver, newton_rtol, newton_atol)
     if project and scene.model.projects:
@@ -32,8 +44,10 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
         controller = dfx.PIDController(rtol=rtol, atol=atol)
     else:
         controller = dfx.ConstantStepSize()
-    meter = dfx.TextProgressMeter(minimum_increase=0.05) if progress else (
-        dfx.NoProgressMeter()
+    meter = (
+        dfx.TextProgressMeter(minimum_increase=0.05)
+        if progress
+        else (dfx.NoProgressMeter())
     )
     sol = dfx.diffeqsolve(
         term,
@@ -63,7 +77,12 @@ def _solve(scene, ts, rtol, atol, dt0, newton_rtol, newton_atol, solver, adaptiv
 
     stats = {
         key: sol.stats[key]
-        for key in ("num_steps", "num_accepted_steps", "num_rejected_steps", "max_steps")
+        for key in (
+            "num_steps",
+            "num_accepted_steps",
+            "num_rejected_steps",
+            "max_steps",
+        )
     }
     t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
     return Trajectory(
@@ -145,6 +164,16 @@ def simulate(
     check_positive("newton_atol", na)
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
     return _solve(
-        scene, ts, f64(rtol), f64(atol), dt0, f64(nr), f64(na), solver, adaptive,
-        max_steps, progress, bool(project),
+        scene,
+        ts,
+        f64(rtol),
+        f64(atol),
+        dt0,
+        f64(nr),
+        f64(na),
+        solver,
+        adaptive,
+        max_steps,
+        progress,
+        bool(project),
     )

@@ -6,8 +6,9 @@ Three final classes share one interface (see ``AbstractString``):
   The end node carries the end mass m_s only (the paper's lumping).
 * ``NaturalTangentString``: strain eps and Cartesian unit tangent t at the nodes
   s_i = i l / k, i = 0..k (eqs 15-23), 2D or 3D; the unit-length constraint is
-  stabilised (Baumgarte) so it cannot drift.
-* ``NaturalAngleString``: strain eps and tangent angle phi (2D), t = (sin phi, -cos phi).
+  kept by projecting the state after each step, so it cannot drift.
+* ``NaturalAngleString``: strain eps and tangent angle phi (2D),
+  t = (sin phi, -cos phi).
 
 State layout is node-major (one row per node) so that the Jacobian of every model is
 block-banded, which the linear algebra of the implicit solvers can exploit.

@@ -12,19 +12,40 @@ import jaxstring as js
 FORMULATIONS = ("displacement", "natural", "angle")
 
 
-@functools.lru_cache(maxsize=None)
-def run(formulation, k=10, EA=1e4, alpha=0.01, t1=1.0, theta0=math.pi / 2,
-        solver="kvaerno5", rtol=1e-8, atol=1e-8, n_save=101, effects=None, mu=1.0,
-        m_s=1.0, dim=2, max_steps=200_000):
+@functools.cache
+def run(
+    formulation,
+    k=10,
+    EA=1e4,
+    alpha=0.01,
+    t1=1.0,
+    theta0=math.pi / 2,
+    solver="kvaerno5",
+    rtol=1e-8,
+    atol=1e-8,
+    n_save=101,
+    effects=None,
+    mu=1.0,
+    m_s=1.0,
+    dim=2,
+    max_steps=200_000,
+):
     """Simulate a string pendulum; cached on all arguments."""
     kw = {} if effects is None else {"effects": effects}
     scene = js.scenes.string_pendulum(
-        formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, theta0=theta0,
-        mu=mu, m_s=m_s, dim=dim, **kw,
+        formulation=formulation,
+        k=k,
+        EA=EA,
+        alpha=alpha,
+        t1=t1,
+        theta0=theta0,
+        mu=mu,
+        m_s=m_s,
+        dim=dim,
+        **kw,
     )
     ts = jnp.linspace(0.0, t1, n_save)
-    return js.simulate(scene, solver, rtol=rtol, atol=atol, ts=ts,
-                       max_steps=max_steps)
+    return js.simulate(scene, solver, rtol=rtol, atol=atol, ts=ts, max_steps=max_steps)
 
 
 def zero_crossings(t, x):

@@ -1,7 +1,5 @@
 """Bad input raises ValueError at construction, naming the argument."""
 
-
-
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -81,4 +79,3 @@ def test_message_states_valid_range():
         pendulum(EA=-1.0)
     with pytest.raises(ValueError, match="kvaerno5"):
         js.simulate(pendulum(k=4), solver="rk4")
-

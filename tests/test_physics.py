@@ -30,8 +30,14 @@ def _axial_mode_scene(formulation, k, EA, V, t1):
         col = 2 if formulation == "angle" else 3
         y0[:, col] = V * (beta / l) * np.cos(beta * s / l)
     scene = js.scenes.string_pendulum(
-        formulation=formulation, k=k, EA=EA, alpha=0.0, theta0=0.0, t1=t1,
-        effects=(), y0=jnp.asarray(y0),
+        formulation=formulation,
+        k=k,
+        EA=EA,
+        alpha=0.0,
+        theta0=0.0,
+        t1=t1,
+        effects=(),
+        y0=jnp.asarray(y0),
     )
     omega = beta / l * math.sqrt(EA / mu)
     return scene, omega
@@ -57,12 +63,24 @@ def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).
     mu, m_s, l, EA, theta0 = 1e-3, 1.0, 1.0, 1e6, 0.05
-    traj = run(formulation, k=10, EA=EA, mu=mu, m_s=m_s, theta0=theta0, t1=3.9,
-               n_save=401, rtol=1e-8, atol=1e-8)
+    traj = run(
+        formulation,
+        k=10,
+        EA=EA,
+        mu=mu,
+        m_s=m_s,
+        theta0=theta0,
+        t1=3.9,
+        n_save=401,
+        rtol=1e-8,
+        atol=1e-8,
+    )
     assert traj.ok, traj.status
     L = l * (1 + m_s * G / EA)
-    T0 = 2 * math.pi * math.sqrt(
-        (m_s * L**2 + mu * L**3 / 3) / (G * (m_s * L + mu * L**2 / 2))
+    T0 = (
+        2
+        * math.pi
+        * math.sqrt((m_s * L**2 + mu * L**3 / 3) / (G * (m_s * L + mu * L**2 / 2)))
     )
     T_exact = T0 * (1 + theta0**2 / 16)
     crossings = zero_crossings(traj.ts, traj.end_mass[:, 0])
@@ -127,8 +145,16 @@ HARD_CASES = {
 def test_hard_cases_integrate(formulation, case):
     kw = HARD_CASES[case]
     max_steps = 200_000
-    traj = run(formulation, k=10, t1=1.0, rtol=1e-6, atol=1e-6, n_save=101,
-               max_steps=max_steps, **kw)
+    traj = run(
+        formulation,
+        k=10,
+        t1=1.0,
+        rtol=1e-6,
+        atol=1e-6,
+        n_save=101,
+        max_steps=max_steps,
+        **kw,
+    )
     assert traj.ok, traj.status
     assert np.all(np.isfinite(np.asarray(traj.ys)))
     assert int(traj.stats["num_steps"]) < max_steps
@@ -163,16 +189,24 @@ def test_three_d_out_of_plane_swing_conserves_energy_and_agrees():
     # A conical swing: out-of-plane velocity at release.
     out = {}
     for formulation in ("displacement", "natural"):
-        base = js.scenes.string_pendulum(formulation=formulation, k=10, EA=1e4,
-                                         alpha=0.0, dim=3, t1=1.0)
+        base = js.scenes.string_pendulum(
+            formulation=formulation, k=10, EA=1e4, alpha=0.0, dim=3, t1=1.0
+        )
         y0 = np.array(base.y0)
         s = np.arange(11) / 10
         if formulation == "displacement":
             y0[:, 5] = 2.0 * s[1:]  # z-velocity of nodes, rigid rotation about y
         else:
             y0[:, 7] = 2.0  # dt/dt = omega x t: z-component of t'
-        scene = js.scenes.string_pendulum(formulation=formulation, k=10, EA=1e4,
-                                          alpha=0.0, dim=3, t1=1.0, y0=jnp.asarray(y0))
+        scene = js.scenes.string_pendulum(
+            formulation=formulation,
+            k=10,
+            EA=1e4,
+            alpha=0.0,
+            dim=3,
+            t1=1.0,
+            y0=jnp.asarray(y0),
+        )
         traj = js.simulate(scene, rtol=1e-9, atol=1e-9, ts=jnp.linspace(0, 1, 51))
         assert traj.ok, traj.status
         e = np.asarray(traj.energy)

@@ -27,8 +27,16 @@ def _err(traj, ref):
 def test_adaptive_solvers_agree_with_reference(solver, tol):
     # Soft string (explicit solvers need no more than a few thousand steps).
     ref = run("displacement", k=6, EA=1e3, t1=0.5, n_save=51, rtol=1e-11, atol=1e-11)
-    traj = run("displacement", k=6, EA=1e3, t1=0.5, n_save=51, solver=solver,
-               rtol=1e-7, atol=1e-7)
+    traj = run(
+        "displacement",
+        k=6,
+        EA=1e3,
+        t1=0.5,
+        n_save=51,
+        solver=solver,
+        rtol=1e-7,
+        atol=1e-7,
+    )
     assert traj.ok, traj.status
     assert _err(traj, ref) < tol, _err(traj, ref)
 
@@ -42,23 +50,37 @@ def test_fixed_step_implicit_euler_paper_setting_first_order():
     dts = (0.005, 0.0025, 0.00125)
     errs = []
     for dt in dts:
-        traj = js.simulate(scene, "implicit_euler_fixed", dt0=dt, rtol=1e-7,
-                           atol=1e-7, ts=ts)
+        traj = js.simulate(
+            scene, "implicit_euler_fixed", dt0=dt, rtol=1e-7, atol=1e-7, ts=ts
+        )
         assert traj.ok, traj.status
         assert int(traj.stats["num_accepted_steps"]) == round(0.4 / dt)
         errs.append(_err(traj, ref))
     order = fitted_order(dts, errs)
     assert 0.8 < order < 1.3, (order, errs)
-    paper = js.simulate(js.scenes.string_pendulum(k=10, EA=1e6, t1=2.0),
-                        "implicit_euler_fixed", dt0=0.005, rtol=1e-7, atol=1e-7)
+    paper = js.simulate(
+        js.scenes.string_pendulum(k=10, EA=1e6, t1=2.0),
+        "implicit_euler_fixed",
+        dt0=0.005,
+        rtol=1e-7,
+        atol=1e-7,
+    )
     assert paper.ok and int(paper.stats["num_accepted_steps"]) == 400
 
 
 def test_failed_solve_returns_status_and_data_up_to_failure():
     # An explicit solver on a stiff string runs out of steps: no exception, a
     # status message, the data up to the failure and NaN afterwards.
-    traj = run("displacement", k=10, EA=1e6, solver="tsit5", max_steps=300,
-               n_save=101, rtol=1e-6, atol=1e-6)
+    traj = run(
+        "displacement",
+        k=10,
+        EA=1e6,
+        solver="tsit5",
+        max_steps=300,
+        n_save=101,
+        rtol=1e-6,
+        atol=1e-6,
+    )
     assert not traj.ok
     assert "maximum number of solver steps" in traj.status
     n = int(traj.n_valid)
