@@ -14,6 +14,7 @@ from ._effects import (
     Loads as Loads,
     Slack as Slack,
 )
+from ._presets import ACCURACY_PRESETS as ACCURACY_PRESETS
 from ._root_finder import StageNewton as StageNewton
 from ._scene import Scene as Scene
 from ._simulate import simulate as simulate
@@ -25,6 +26,36 @@ from ._string import (
     NaturalTangentString as NaturalTangentString,
 )
 from ._trajectory import Trajectory as Trajectory
+from ._vessel import (
+    AbstractActuator as AbstractActuator,
+    AbstractVesselLoad as AbstractVesselLoad,
+    ConstantThrust as ConstantThrust,
+    fpso_hull as fpso_hull,
+    Hawser as Hawser,
+    Hull as Hull,
+    LinearDamping as LinearDamping,
+    make_hull as make_hull,
+    MooredFPSO as MooredFPSO,
+    OCIMFWind as OCIMFWind,
+    ShortWingCurrent as ShortWingCurrent,
+    shuttle_hull as shuttle_hull,
+    Tandem as Tandem,
+    TurretMooring as TurretMooring,
+)
+from ._control import (
+    ComputedForcePD as ComputedForcePD,
+    NonlinearCompensator as NonlinearCompensator,
+)
+from ._tanker_analysis import (
+    controlled_metrics as controlled_metrics,
+    find_equilibria as find_equilibria,
+    find_equilibria_map as find_equilibria_map,
+    hopf_sweep as hopf_sweep,
+    measure_limit_cycle as measure_limit_cycle,
+    pitchfork_sweep as pitchfork_sweep,
+    solve_equilibrium as solve_equilibrium,
+    stability as stability,
+)
 
 
 __version__ = "0.1.0"

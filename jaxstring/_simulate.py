@@ -6,11 +6,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._presets import ACCURACY_PRESETS
 from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
 from ._solvers import build_solver, check_solver, is_adaptive
 from ._trajectory import Trajectory
-from ._validate import check_int, check_positive, is_concrete
+from ._validate import check_choice, check_int, check_positive, is_concrete
 
 
 def observables(scene: Scene, ts, ys):
@@ -110,6 +111,7 @@ def simulate(
     max_steps: int = 200_000,
     progress: bool = False,
     project: bool = True,
+    accuracy: str | None = None,
 ) -> Trajectory:
     """Integrate a scene and return its Trajectory.
 
@@ -127,6 +129,10 @@ def simulate(
       (default: `rtol`, `atol`).
     - `max_steps`: limit on the number of steps.
     - `progress`: print a text progress meter.
+    - `accuracy`: `"draft"`, `"balanced"` or `"precise"` -- a preset of solver and
+      tolerances measured in `experiments/work_precision.py` (see
+      `jaxstring.ACCURACY_PRESETS` for the measured error and time of each); it
+      replaces `solver`, `rtol` and `atol`.
     - `project`: for models with a constraint manifold (the Cartesian-tangent
       string), project the state onto it after every step and at the save times
       (default True); False integrates the raw constrained equations, to show drift.
@@ -138,6 +144,10 @@ def simulate(
     """
     if not isinstance(scene, Scene):
         raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
+    if accuracy is not None:
+        check_choice("accuracy", accuracy, tuple(ACCURACY_PRESETS))
+        preset = ACCURACY_PRESETS[accuracy]
+        solver, rtol, atol = preset["solver"], preset["rtol"], preset["atol"]
     check_solver(solver)
     check_positive("rtol", rtol)
     check_positive("atol", atol)
@@ -156,7 +166,8 @@ def simulate(
         tsn = np.asarray(ts)
         if tsn.ndim != 1 or np.any(np.diff(tsn) < 0):
             raise ValueError("`ts` must be a 1-d array of increasing times.")
-        if tsn[0] < float(scene.t0) or tsn[-1] > float(scene.t1):
+        span_known = is_concrete(scene.t0) and is_concrete(scene.t1)
+        if span_known and (tsn[0] < float(scene.t0) or tsn[-1] > float(scene.t1)):
             raise ValueError("`ts` must lie inside [scene.t0, scene.t1].")
     nr = rtol if newton_rtol is None else newton_rtol
     na = atol if newton_atol is None else newton_atol

@@ -3,6 +3,14 @@
 import math
 
 from ._effects import EFFECTS, Gravity, KelvinVoigt, Slack
+from ._tanker_scenes import (
+    ENVIRONMENTS as TANDEM_ENVIRONMENTS,
+    tandem_controlled as tandem_controlled,
+    tandem_equilibria as tandem_equilibria,
+    tandem_fishtail as tandem_fishtail,
+    tandem_fpso_alone as tandem_fpso_alone,
+    tandem_hopf as tandem_hopf,
+)
 from ._scene import Scene
 from ._string import FORMULATIONS
 from ._validate import (

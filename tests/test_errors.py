@@ -79,3 +79,8 @@ def test_message_states_valid_range():
         pendulum(EA=-1.0)
     with pytest.raises(ValueError, match="kvaerno5"):
         js.simulate(pendulum(k=4), solver="rk4")
+
+
+def test_unknown_accuracy_preset():
+    with pytest.raises(ValueError, match="accuracy"):
+        js.simulate(pendulum(k=4), accuracy="exact")

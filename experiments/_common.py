@@ -1,0 +1,293 @@
+"""Shared helpers of the experiments: timing, machine stamp, tables and figures.
+
+Timing rules (project conventions): the first call of a jaxstring configuration
+traces and compiles; it is reported as ``compile_s`` (first call minus the median
+run) and never mixed into ``run_s``, the median of the repeats that follow. Every
+comparison is a ratio of medians measured in the same process, one after the other.
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import csv
+import dataclasses
+import datetime
+import pathlib
+import platform
+import statistics
+import sys
+import time
+
+import jax
+import numpy as np
+
+
+RESULTS = pathlib.Path(__file__).resolve().parent / "results"
+
+
+def results_dir() -> pathlib.Path:
+    """experiments/results/, or $JAXSTRING_RESULTS_DIR (the smoke test: a tmp dir)."""
+    return pathlib.Path(os.environ.get("JAXSTRING_RESULTS_DIR", RESULTS))
+
+
+# One run longer than this (s) is not repeated three times (2-core shared machine):
+LONG_RUN_S = 6.0
+
+
+def block(x):
+    """Wait for JAX work inside `x` (any PyTree) to finish."""
+    return jax.block_until_ready(x)
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
+def machine_stamp() -> dict:
+    """Date, processor, cores, load and versions, for every results table."""
+    return {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "processor": platform.processor() or _cpu_model() or platform.machine(),
+        "cores": os.cpu_count(),
+        "load_1min": round(os.getloadavg()[0], 2),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "numpy": np.__version__,
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "?"),
+    }
+
+
+@dataclasses.dataclass
+class Timing:
+    """Wall times of one configuration, s."""
+
+    compile_s: float  # first call minus the median run (trace + compile + warm-up)
+    run_s: float  # median of the repeats
+    runs: list  # every repeat
+    first_s: float
+
+    @property
+    def n(self) -> int:
+        return len(self.runs)
+
+
+def timed(fn, repeats: int = 3, long_run_s: float = LONG_RUN_S):
+    """Call `fn()` once to compile and warm up, then `repeats` more times.
+
+    Returns `(Timing, last result)`. A run longer than `long_run_s` is repeated
+    once only (the table says how many repeats each median has).
+    """
+    t0 = time.perf_counter()
+    out = block(fn())
+    first = time.perf_counter() - t0
+    runs = []
+    for i in range(max(repeats, 1)):
+        t0 = time.perf_counter()
+        out = block(fn())
+        runs.append(time.perf_counter() - t0)
+        if i == 0 and runs[0] > long_run_s:
+            break
+    med = statistics.median(runs)
+    return Timing(max(first - med, 0.0), med, runs, first), out
+
+
+def timed_split(warmup, fn, repeats: int = 3, long_run_s: float = LONG_RUN_S):
+    """Like `timed`, for peers whose compile step is separate: `warmup()` is timed
+    as the compile time (e.g. jit of the right-hand side), then `fn()` is repeated."""
+    t0 = time.perf_counter()
+    warmup()
+    comp = time.perf_counter() - t0
+    runs = []
+    out = None
+    for i in range(max(repeats, 1)):
+        t0 = time.perf_counter()
+        out = fn()
+        runs.append(time.perf_counter() - t0)
+        if i == 0 and runs[0] > long_run_s:
+            break
+    med = statistics.median(runs)
+    return Timing(comp, med, runs, comp + runs[0]), out
+
+
+def end_mass_error(a, b) -> float:
+    """Largest distance between two end-mass trajectories `(T, dim)` (m)."""
+    a = np.asarray(a)
+    b = np.asarray(b)
+    if a.shape != b.shape or not np.all(np.isfinite(a)):
+        return float("nan")
+    return float(np.max(np.linalg.norm(a - b, axis=-1)))
+
+
+def fmt(x, spec=".3g") -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float):
+        if not np.isfinite(x):
+            return "nan"
+        return format(x, spec)
+    return str(x)
+
+
+def write_table(name: str, rows: list, columns: list, title: str, notes=()):
+    """Write `results/<name>.csv` and `results/<name>.md` (stamped); print the table.
+
+    `rows` are dicts; `columns` the keys to show, in order.
+    """
+    out = results_dir()
+    out.mkdir(parents=True, exist_ok=True)
+    stamp = machine_stamp()
+    stamp_line = ", ".join(f"{k}: {v}" for k, v in stamp.items())
+    with open(out / f"{name}.csv", "w", newline="") as f:
+        f.write(f"# {title}\n# {stamp_line}\n")
+        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: r.get(c, "") for c in columns})
+    lines = [f"## {title}", "", f"_{stamp_line}_", ""]
+    lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt(r.get(c)) for c in columns) + " |")
+    if notes:
+        lines.append("")
+        lines += [f"- {n}" for n in notes]
+    text = "\n".join(lines) + "\n"
+    (out / f"{name}.md").write_text(text)
+    print(text)
+    sys.stdout.flush()
+    return out / f"{name}.md"
+
+
+def savefig(fig, name: str):
+    import matplotlib.pyplot as plt
+
+    results_dir().mkdir(parents=True, exist_ok=True)
+    path = results_dir() / f"{name}.png"
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    print(f"figure: {path}")
+    return path
+
+
+def new_figure(ncols=1, nrows=1, w=5.0, h=3.8):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(w * ncols, h * nrows), squeeze=False
+    )
+    return fig, axes
+
+
+def solver_names(kind: str = "all", wanted=None) -> list:
+    """Solver names from `jaxstring.SOLVERS`, so new solvers appear automatically.
+
+    `kind`: "all", "adaptive", "fixed", "implicit", "explicit". `wanted`: keep only
+    these names (in this order), skipping names the registry lacks.
+    """
+    import jaxstring
+
+    reg = jaxstring.SOLVERS
+    names = list(reg) if wanted is None else [n for n in wanted if n in reg]
+    out = []
+    for n in names:
+        _, adaptive, implicit = reg[n][:3]
+        if (
+            kind == "all"
+            or (kind == "adaptive" and adaptive)
+            or (kind == "fixed" and not adaptive)
+            or (kind == "implicit" and implicit)
+            or (kind == "explicit" and not implicit)
+        ):
+            out.append(n)
+    return out
+
+
+def stats_dict(traj) -> dict:
+    """Integer solver statistics of a Trajectory."""
+    return {k: int(v) for k, v in traj.stats.items() if k != "max_steps"}
+
+
+# One max_steps for every jaxstring run: it is static, so changing it recompiles.
+MAX_STEPS = 100_000
+
+
+def run_jaxstring(
+    scene,
+    solver,
+    ts,
+    *,
+    rtol,
+    atol,
+    newton_tol=None,
+    dt0=None,
+    repeats=3,
+    max_steps=MAX_STEPS,
+):
+    """Time `jaxstring.simulate` (compile separate, median of repeats); return a row
+    dict with times, status, step counts and the end-mass trajectory (`end`)."""
+    import jaxstring
+
+    kw = {"rtol": rtol, "atol": atol, "ts": ts, "max_steps": max_steps}
+    if newton_tol is not None:
+        kw.update(newton_rtol=newton_tol, newton_atol=newton_tol)
+    adaptive = jaxstring.SOLVERS[solver][1]
+    if dt0 is not None and not adaptive:
+        kw["dt0"] = dt0
+    row = {"solver": solver, "adaptive": adaptive}
+    try:
+        tm, traj = timed(lambda: jaxstring.simulate(scene, solver, **kw), repeats)
+    except Exception as e:  # a solver that cannot run is a result, not a crash
+        row.update(
+            ok=False,
+            status=f"{type(e).__name__}: {e}"[:120],
+            end=None,
+            compile_s=float("nan"),
+            run_s=float("nan"),
+            repeats=0,
+        )
+        return row
+    row.update(
+        ok=traj.ok,
+        status=traj.status,
+        compile_s=tm.compile_s,
+        run_s=tm.run_s,
+        repeats=tm.n,
+        end=np.asarray(traj.end_mass) if traj.ok else None,
+        **stats_dict(traj),
+    )
+    return row
+
+
+def run_peer(rhs, peer, jac, ts, *, rtol, atol, repeats=3):
+    """Time one external reference (see references.py) on the JAX-compiled RHS."""
+    import references
+
+    tm, out = timed_split(
+        rhs.compile, lambda: references.solve(rhs, peer, ts, rtol, atol, jac), repeats
+    )
+    return {
+        "solver": f"{peer} [{jac}]",
+        "ok": out["ok"],
+        "status": "success" if out["ok"] else out["message"][:120],
+        "compile_s": rhs.compile_s,
+        "run_s": tm.run_s,
+        "repeats": tm.n,
+        "nfev": out["nfev"],
+        "njev": out["njev"],
+        "end": rhs.end_mass(out["ys"]) if out["ok"] else None,
+    }
+
+
+def parse_list(text, conv=float):
+    return [conv(x) for x in text.split(",")] if text else None

@@ -1,0 +1,201 @@
+"""Cost vs number of elements k at EA = 1e6, with the fitted exponent.
+
+Question: how does wall time grow with k = 10 ... 640 (the paper reports about k^2)
+for the best jaxstring solver and for CVODE on the identical right-hand side (with
+the JAX Jacobian in band form, so CVODE's band LU costs O(k) per factorisation)?
+The best jaxstring solver is the fastest implicit adaptive one at the second k
+(every candidate runs at the first two k). A configuration stops growing k when one
+run takes longer than the budget. Settings: (eps, phi) by default, 2 s,
+rtol = atol = 1e-7.
+
+Run: ``python experiments/scaling_k.py [--quick]``.
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import math
+import sys
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import numpy as np
+import references
+from _common import (
+    end_mass_error,
+    new_figure,
+    parse_list,
+    run_jaxstring,
+    run_peer,
+    savefig,
+    solver_names,
+    write_table,
+)
+
+import jaxstring
+
+
+KS = (10, 20, 40, 80, 160, 320, 640)
+
+
+def fit_exponent(ks, times):
+    """Least-squares slope of log(time) vs log(k) (nan with fewer than 2 points)."""
+    if len(ks) < 2:
+        return math.nan
+    return float(np.polyfit(np.log(ks), np.log(times), 1)[0])
+
+
+def main(
+    quick=False,
+    formulation="angle",
+    ks=None,
+    EA=1e6,
+    solvers=None,
+    repeats=None,
+    tol=1e-7,
+    budget_s=90.0,
+):
+    """Run the k-scaling study; return (rows, exponents)."""
+    ks = ks or ((4, 8) if quick else KS)
+    t1 = 0.2 if quick else 2.0
+    repeats = repeats or (1 if quick else 3)
+    candidates = solvers or (["kvaerno5"] if quick else solver_names("implicit"))
+    candidates = [
+        n for n in candidates if n in jaxstring.SOLVERS and jaxstring.SOLVERS[n][1]
+    ]
+    avail = references.available()
+    peers = [("cvode-BDF", "jax-band")] if avail["cvode-BDF"] else []
+    if avail["scipy-Radau"] and not quick:
+        peers.append(("scipy-Radau", "jax-band"))
+    ts = np.linspace(0.0, t1, 41)
+    rows = []
+    active = list(candidates) + [f"{p} [{j}]" for p, j in peers]
+    best = None
+    for i, k in enumerate(ks):
+        scene = jaxstring.scenes.string_pendulum(
+            formulation=formulation, k=k, EA=EA, t1=t1
+        )
+        rhs = references.JaxRHS(scene)
+        ref = None
+        for name in list(active):
+            if "[" in name:
+                p, j = name.split(" [")
+                r = run_peer(
+                    rhs, p, j.rstrip("]"), ts, rtol=tol, atol=tol, repeats=repeats
+                )
+            else:
+                r = run_jaxstring(scene, name, ts, rtol=tol, atol=tol, repeats=repeats)
+            end = r.pop("end")
+            if ref is None and r["ok"]:
+                ref = end
+            r.update(
+                k=k,
+                n_states=int(scene.y0.size),
+                diff_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+            )
+            rows.append(r)
+            print(f"k={k} {name}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
+            if not r["ok"] or r["run_s"] > budget_s:
+                active.remove(name)
+        if i == min(1, len(ks) - 1):
+            # keep only the fastest jaxstring candidate from here on
+            js = [r for r in rows if r["k"] == k and r["ok"] and "[" not in r["solver"]]
+            if js:
+                best = min(js, key=lambda r: r["run_s"])["solver"]
+            active = [a for a in active if "[" in a or a == best]
+    exps = []
+    for name in dict.fromkeys(r["solver"] for r in rows):
+        pts = [(r["k"], r["run_s"]) for r in rows if r["solver"] == name and r["ok"]]
+        if len(pts) >= 2:
+            x, y = zip(*pts)
+            exps.append(
+                {
+                    "solver": name,
+                    "k_range": f"{min(x)}-{max(x)}",
+                    "exponent": fit_exponent(x, y),
+                    "exponent_upper_half": fit_exponent(
+                        x[len(x) // 2 - 1 :], y[len(y) // 2 - 1 :]
+                    )
+                    if len(x) >= 3
+                    else math.nan,
+                    "best": name == best,
+                }
+            )
+    tag = "_quick" if quick else ""
+    write_table(
+        f"scaling_k{tag}",
+        rows,
+        [
+            "k",
+            "n_states",
+            "solver",
+            "ok",
+            "run_s",
+            "repeats",
+            "compile_s",
+            "num_steps",
+            "num_rejected_steps",
+            "nfev",
+            "njev",
+            "diff_m",
+            "status",
+        ],
+        f"Wall time vs k, {formulation}, EA={EA:g}, t1={t1} s, rtol=atol={tol:g}",
+        notes=[
+            "diff_m: end-mass distance to the first successful run at the same k.",
+            "run_s: median of `repeats` runs after a compile/warm-up run.",
+        ],
+    )
+    write_table(
+        f"scaling_k_exponents{tag}",
+        exps,
+        ["solver", "best", "k_range", "exponent", "exponent_upper_half"],
+        "Fitted exponent p of wall time ~ k^p (the paper: about 2)",
+    )
+    fig, axes = new_figure(1, 1, w=6)
+    ax = axes[0][0]
+    for c, e in enumerate(exps):
+        pts = [
+            (r["k"], r["run_s"]) for r in rows if r["solver"] == e["solver"] and r["ok"]
+        ]
+        x, y = zip(*pts)
+        ax.loglog(
+            x,
+            y,
+            "--" if "[" in e["solver"] else "-",
+            marker="o",
+            ms=3,
+            color=f"C{c}",
+            label=f"{e['solver']}: k^{e['exponent']:.2f}",
+        )
+    if exps:
+        x0 = np.array([ks[0], ks[-1]], float)
+        y0 = min(r["run_s"] for r in rows if r["ok"])
+        ax.loglog(x0, y0 * (x0 / x0[0]) ** 2, ":", color="gray", label="k^2")
+    ax.set_xlabel("number of elements k")
+    ax.set_ylabel("wall time (s)")
+    ax.set_title(f"cost vs k, {formulation}, EA={EA:g}")
+    ax.legend(fontsize=7)
+    savefig(fig, f"scaling_k{tag}")
+    return rows, exps
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--formulation", default="angle")
+    p.add_argument("--ks", default="")
+    p.add_argument("--solvers", default="")
+    p.add_argument("--repeats", type=int, default=0)
+    a = p.parse_args()
+    main(
+        quick=a.quick,
+        formulation=a.formulation,
+        ks=parse_list(a.ks, int),
+        solvers=parse_list(a.solvers, str),
+        repeats=a.repeats or None,
+    )

@@ -1,0 +1,186 @@
+"""S4: the shuttle under the nonlinear compensator (law B) and law A, in the four
+environments of the spec, with the acceptance list (after 3000 s: |d - d_ref| <
+0.5 m, |y2| < 0.5 deg; hull clearance > 0 throughout; actuator limits respected),
+a model-mismatch check (the compensator believes C_Y and the wind areas 20 % off)
+and the solver choice (tsit5 vs dopri5 vs kvaerno5 on the same scene: compile and
+run time, medians of repeats, ratios from this run).
+
+Writes results/tanker_controlled.{png,csv,md} (+ one figure per environment).
+
+    python experiments/tanker_controlled.py [--quick]
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxstring as js
+from jaxstring import tanker_plot as tp
+from jaxstring._tanker_analysis import controlled_metrics
+from jaxstring._tanker_scenes import ENVIRONMENTS, tandem_controlled, tandem_model
+from jaxstring._vessel import fpso_hull, shuttle_hull
+
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+OUT = os.environ.get("JAXSTRING_RESULTS_DIR", os.path.join(HERE, "results"))
+KEYS = (
+    "span_error",
+    "heading_error",
+    "span_min",
+    "clearance_min",
+    "X_peak",
+    "N_peak",
+    "psi1_final",
+    "X_final",
+    "N_final",
+    "ok",
+)
+
+
+def row(law, env, m, run_s):
+    """One markdown row of the acceptance table."""
+    cells = (
+        law,
+        env,
+        f"{m['span_error']:.2e}",
+        f"{m['heading_error']:.2e}",
+        f"{m['span_min']:.2f}",
+        f"{m['clearance_min']:.1f}",
+        f"{m['X_peak'] / 1e3:.0f}",
+        f"{m['N_peak']:.3g}",
+        f"{m['psi1_final']:.2f}",
+        f"{m['X_final'] / 1e3:.0f}",
+        f"{m['N_final']:.3g}",
+        str(m["ok"]),
+        f"{run_s:.2f}",
+    )
+    return "| " + " | ".join(cells) + " |"
+
+
+def run(scene, solver="tsit5", repeats=1, n_save=None):
+    n_save = n_save or int(float(scene.t1) / 2) + 1
+    ts = jnp.linspace(0.0, float(scene.t1), n_save)
+    walls = []
+    for _ in range(repeats + 1):
+        t = time.perf_counter()
+        traj = jax.block_until_ready(
+            js.simulate(scene, solver, rtol=1e-8, atol=1e-8, ts=ts, max_steps=10**6)
+        )
+        walls.append(time.perf_counter() - t)
+    run_s = float(np.median(walls[1:]))
+    return traj, walls[0] - run_s, run_s
+
+
+def mismatched(scene, factor_cy=1.2, factor_wind=0.8):
+    """The same scene, but the compensator's internal model has C_Y x factor_cy and
+    wind areas x factor_wind on both hulls (spec S4 recommended test)."""
+    f, s = fpso_hull(), shuttle_hull()
+    f = eqx.tree_at(
+        lambda h: (h.C_Y, h.A_F, h.A_L),
+        f,
+        (f.C_Y * factor_cy, f.A_F * factor_wind, f.A_L * factor_wind),
+    )
+    s = eqx.tree_at(
+        lambda h: (h.C_Y, h.A_F, h.A_L),
+        s,
+        (s.C_Y * factor_cy, s.A_F * factor_wind, s.A_L * factor_wind),
+    )
+    ctl = eqx.tree_at(
+        lambda c: c.internal_model,
+        scene.effects[-1],
+        tandem_model(fpso=f, shuttle=s),
+        is_leaf=lambda x: x is None,
+    )
+    return eqx.tree_at(lambda sc: sc.effects[-1], scene, ctl)
+
+
+def main(quick=False):
+    os.makedirs(OUT, exist_ok=True)
+    sfx = "_quick" if quick else ""
+    t1 = 4000.0 if quick else 6000.0
+    rows, lines, compile_s = [], [], {}
+    header = (
+        "| law | env | |d-dref| m | |y2| deg | d_min m | clearance m | |X|max kN "
+        "| |N|max N m | psi1 end deg | X end kN | N end N m | ok | run s |"
+    )
+    lines += [header, "|" + "---|" * 13]
+    laws = ("B",) if quick else ("B", "A")
+    for law in laws:
+        for env in ENVIRONMENTS:
+            sc = tandem_controlled(env=env, law=law, t1=t1)
+            ctl = sc.effects[-1]
+            traj, comp, run_s = run(sc)
+            compile_s.setdefault((law, "wind" in env), comp)
+            m = controlled_metrics(traj, float(ctl.d_ref), ctl.X_max, ctl.N_max)
+            rows.append((law, env, *[m[k] for k in KEYS]))
+            lines.append(row(law, env, m, run_s))
+            if law == "B":
+                tp.tandem_figure(
+                    traj,
+                    sc.model,
+                    os.path.join(OUT, f"tanker_controlled_{env}{sfx}.png"),
+                    title=f"S4 law B, {env}",
+                    d_ref=float(ctl.d_ref),
+                )
+    # Model mismatch (no integral action: K_I is not implemented, see report).
+    lines += [
+        "",
+        "Model mismatch (law B believes C_Y x1.2 and wind areas x0.8; "
+        "no integral action):",
+        "",
+        header,
+        "|" + "---|" * 13,
+    ]
+    for env in ("wind15_90",) if quick else tuple(ENVIRONMENTS):
+        sc = mismatched(tandem_controlled(env=env, t1=t1))
+        ctl = sc.effects[-1]
+        traj, comp, run_s = run(sc)
+        m = controlled_metrics(traj, float(ctl.d_ref), ctl.X_max, ctl.N_max)
+        lines.append(row("B*", env, m, run_s))
+        rows.append(("B-mismatch", env, *[m[k] for k in KEYS]))
+    # Solver choice on one scene.
+    lines += [
+        "",
+        "Solver choice (law B, wind15_90, rtol = atol = 1e-8):",
+        "",
+        "| solver | steps | compile s | run s (median) | run / tsit5 |",
+        "|---|---|---|---|---|",
+    ]
+    sc = tandem_controlled(env="wind15_90", t1=t1)
+    ref = None
+    for solver in ("tsit5", "dopri5", "kvaerno5"):
+        traj, comp, run_s = run(sc, solver, repeats=1 if quick else 3)
+        if solver == "tsit5":  # compiled already by the first windy run above
+            comp = compile_s[("B", True)]
+        ref = run_s if ref is None else ref
+        lines.append(
+            f"| {solver} | {int(traj.stats['num_steps'])} | {comp:.1f} | "
+            f"{run_s:.3f} | {run_s / ref:.1f} |"
+        )
+    text = "\n".join(lines)
+    print(text)
+    with open(os.path.join(OUT, f"tanker_controlled{sfx}.md"), "w") as f:
+        f.write("# S4 controlled tandem\n\n" + text + "\n")
+    with open(os.path.join(OUT, f"tanker_controlled{sfx}.csv"), "w") as f:
+        f.write("law,env," + ",".join(KEYS) + "\n")
+        for r in rows:
+            f.write(
+                ",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r)
+                + "\n"
+            )
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    a = p.parse_args()
+    main(quick=a.quick)

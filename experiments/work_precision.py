@@ -1,0 +1,293 @@
+"""Work-precision diagrams: end-mass error vs wall time, one curve per solver.
+
+Question: what does accuracy cost? For each formulation and EA (1e4, 1e6, 1e8, and
+1e9 for the headline), every adaptive jaxstring solver and the external references
+(CVODE, IDA, scipy Radau/BDF/LSODA, all with the JAX Jacobian in band form on the
+identical right-hand side) run at rtol = atol = 1e-3 ... 1e-10. The error is the
+largest distance of the end mass from a reference at rtol = atol = 1e-12 computed by
+a *different* solver (CVODE for jaxstring's solvers and Radau, scipy Radau for the
+BDF-family peers; their mutual distance is reported as the reference floor).
+
+Outputs the diagrams, the table, a headline table (time to reach a given accuracy,
+and ratios jaxstring / CVODE / Radau in the same run) and the suggested presets.
+
+Run: ``python experiments/work_precision.py [--quick]``.
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import math
+import sys
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import numpy as np
+import references
+from _common import (
+    MAX_STEPS,
+    end_mass_error,
+    new_figure,
+    parse_list,
+    run_jaxstring,
+    run_peer,
+    savefig,
+    solver_names,
+    write_table,
+)
+
+import jaxstring
+
+
+FORMULATIONS = ("displacement", "natural", "angle")
+EAS = (1e4, 1e6, 1e8, 1e9)
+TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+PEER_JAC = "jax-band"
+TARGETS = (1e-3, 1e-5, 1e-7)  # end-mass accuracy levels (m) for the headline
+
+
+def references_pair(scene, ts, tol, max_steps=1_000_000):
+    """Two tight references from different solvers: (ref_a, label_a, ref_b, label_b).
+
+    ref_a (CVODE, BDF) judges jaxstring's solvers and Radau; ref_b (scipy Radau,
+    implicit Runge-Kutta) judges the BDF-family peers (CVODE, IDA, LSODA, scipy BDF).
+    Without the peers installed, jaxstring's Kvaerno5 stands in.
+    """
+    avail = references.available()
+    rhs = references.JaxRHS(scene)
+    refs = []
+    for peer in ("cvode-BDF", "scipy-Radau"):
+        if avail[peer]:
+            out = references.solve(rhs, peer, ts, tol, tol, PEER_JAC)
+            if out["ok"]:
+                refs.append((rhs.end_mass(out["ys"]), f"{peer} at {tol:g}"))
+    if len(refs) < 2:
+        traj = jaxstring.simulate(
+            scene, "kvaerno5", rtol=tol, atol=tol, ts=ts, max_steps=max_steps
+        )
+        refs.append((np.asarray(traj.end_mass), f"kvaerno5 at {tol:g}"))
+    (ref_a, lab_a), (ref_b, lab_b) = refs[0], refs[1]
+    return ref_a, lab_a, ref_b, lab_b
+
+
+def time_to_reach(rows, target):
+    """Smallest run time among a curve's runs whose error is <= target (or nan)."""
+    ok = [r["run_s"] for r in rows if r.get("ok") and r["err_m"] <= target]
+    return min(ok) if ok else math.nan
+
+
+def main(
+    quick=False,
+    formulations=None,
+    EAs=None,
+    tols=None,
+    solvers=None,
+    peers=None,
+    repeats=None,
+    ref_tol=1e-12,
+    budget_s=60.0,
+):
+    """Run the work-precision study; return (rows, headline rows)."""
+    k = 8 if quick else 40
+    t1 = 0.2 if quick else 2.0
+    formulations = formulations or (("angle",) if quick else FORMULATIONS)
+    EAs = EAs or ((1e6,) if quick else EAS)
+    tols = tols or ((1e-4, 1e-6) if quick else TOLS)
+    repeats = repeats or (1 if quick else 3)
+    ref_tol = 1e-10 if quick else ref_tol
+    names = solvers or (["kvaerno5"] if quick else solver_names("adaptive"))
+    names = [n for n in names if n in jaxstring.SOLVERS and jaxstring.SOLVERS[n][1]]
+    avail = references.available()
+    peers = peers or (["cvode-BDF"] if quick else list(references.PEERS))
+    peers = [p for p in peers if avail.get(p)]
+    ts = np.linspace(0.0, t1, 41)
+    rows, floors = [], []
+    for form in formulations:
+        for EA in EAs:
+            scene = jaxstring.scenes.string_pendulum(
+                formulation=form, k=k, EA=EA, t1=t1
+            )
+            ref_a, lab_a, ref_b, lab_b = references_pair(
+                scene, ts, ref_tol, MAX_STEPS if quick else 1_000_000
+            )
+            floor = end_mass_error(ref_a, ref_b)
+            floors.append(f"{form} EA={EA:g}: |{lab_a} - {lab_b}| = {floor:.2e} m")
+            rhs = references.JaxRHS(scene)
+            curves = [(n, "js") for n in names] + [(p, "peer") for p in peers]
+            for who, kind in curves:
+                for tol in tols:
+                    if kind == "js":
+                        r = run_jaxstring(
+                            scene, who, ts, rtol=tol, atol=tol, repeats=repeats
+                        )
+                        ref = ref_a
+                    else:
+                        r = run_peer(
+                            rhs, who, PEER_JAC, ts, rtol=tol, atol=tol, repeats=repeats
+                        )
+                        ref = ref_a if who == "scipy-Radau" else ref_b
+                    end = r.pop("end")
+                    r.update(
+                        formulation=form,
+                        EA=EA,
+                        tol=tol,
+                        kind=kind,
+                        err_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                    )
+                    rows.append(r)
+                    print(
+                        f"{form} EA={EA:g} {r['solver']} tol={tol:g}: "
+                        f"{r['run_s']:.3g} s err={r['err_m']:.2e}",
+                        flush=True,
+                    )
+                    if not r["ok"] or r["run_s"] > budget_s:
+                        break  # tighter tolerances would only cost more
+    tag = "_quick" if quick else ""
+    write_table(
+        f"work_precision{tag}",
+        rows,
+        [
+            "formulation",
+            "EA",
+            "solver",
+            "tol",
+            "ok",
+            "err_m",
+            "run_s",
+            "repeats",
+            "compile_s",
+            "num_steps",
+            "num_rejected_steps",
+            "nfev",
+            "njev",
+            "status",
+        ],
+        f"Work-precision: end-mass error vs wall time, k={k}, t1={t1} s",
+        notes=[
+            f"err_m: max end-mass distance (m) over 41 save times vs a reference at "
+            f"rtol=atol={ref_tol:g} from a different solver (jaxstring solvers and "
+            "Radau vs CVODE; CVODE, IDA, LSODA, scipy BDF vs Radau).",
+            *floors,
+            f"external solvers get the JAX Jacobian in band form ([{PEER_JAC}]).",
+            "run_s: median of `repeats` runs after a compile/warm-up run.",
+        ],
+    )
+    head = headline(rows, formulations, EAs, names, peers)
+    write_table(
+        f"work_precision_headline{tag}",
+        head,
+        [
+            "formulation",
+            "EA",
+            "target_m",
+            "best_jaxstring",
+            "t_jaxstring_s",
+            "t_cvode_s",
+            "t_radau_s",
+            "t_best_peer_s",
+            "best_peer",
+            "ratio_js_over_cvode",
+            "ratio_js_over_radau",
+        ],
+        "Time to reach an end-mass accuracy (min over tolerances), same run",
+        notes=["ratio < 1: jaxstring faster. nan: no run reached the target."],
+    )
+    _plot(rows, formulations, EAs, tag)
+    return rows, head
+
+
+def headline(rows, formulations, EAs, names, peers):
+    out = []
+    for form in formulations:
+        for EA in EAs:
+            sel = [r for r in rows if r["formulation"] == form and r["EA"] == EA]
+            for target in TARGETS:
+                t_js = {
+                    n: time_to_reach([r for r in sel if r["solver"] == n], target)
+                    for n in names
+                }
+                t_pe = {
+                    p: time_to_reach(
+                        [r for r in sel if r["solver"] == f"{p} [{PEER_JAC}]"], target
+                    )
+                    for p in peers
+                }
+                good = {n: t for n, t in t_js.items() if np.isfinite(t)}
+                best = min(good, key=good.get) if good else "-"
+                tb = good.get(best, math.nan)
+                pg = {p: t for p, t in t_pe.items() if np.isfinite(t)}
+                bp = min(pg, key=pg.get) if pg else "-"
+                tc = t_pe.get("cvode-BDF", math.nan)
+                tr = t_pe.get("scipy-Radau", math.nan)
+                out.append(
+                    {
+                        "formulation": form,
+                        "EA": EA,
+                        "target_m": target,
+                        "best_jaxstring": best,
+                        "t_jaxstring_s": tb,
+                        "t_cvode_s": tc,
+                        "t_radau_s": tr,
+                        "best_peer": bp,
+                        "t_best_peer_s": pg.get(bp, math.nan),
+                        "ratio_js_over_cvode": tb / tc,
+                        "ratio_js_over_radau": tb / tr,
+                    }
+                )
+    return out
+
+
+def _plot(rows, formulations, EAs, tag):
+    fig, axes = new_figure(len(EAs), len(formulations), w=4.2, h=3.4)
+    for i, form in enumerate(formulations):
+        for j, EA in enumerate(EAs):
+            ax = axes[i][j]
+            sel = [r for r in rows if r["formulation"] == form and r["EA"] == EA]
+            for c, who in enumerate(dict.fromkeys(r["solver"] for r in sel)):
+                pts = sorted(
+                    (r["run_s"], r["err_m"])
+                    for r in sel
+                    if r["solver"] == who and r["ok"] and r["err_m"] > 0
+                )
+                if pts:
+                    x, y = zip(*pts)
+                    ax.loglog(
+                        x,
+                        y,
+                        "--" if "[" in who else "-",
+                        marker="o",
+                        ms=3,
+                        color=f"C{c % 10}",
+                        label=who,
+                    )
+            ax.set_title(f"{form}, EA={EA:g}", fontsize=9)
+            ax.set_xlabel("wall time (s)")
+            ax.set_ylabel("end-mass error (m)")
+            ax.grid(True, which="major", alpha=0.3)
+    axes[0][0].legend(fontsize=6)
+    savefig(fig, f"work_precision{tag}")
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--formulations", default="")
+    p.add_argument("--EAs", default="")
+    p.add_argument("--tols", default="")
+    p.add_argument("--solvers", default="")
+    p.add_argument("--peers", default="")
+    p.add_argument("--repeats", type=int, default=0)
+    a = p.parse_args()
+    main(
+        quick=a.quick,
+        formulations=parse_list(a.formulations, str),
+        EAs=parse_list(a.EAs),
+        tols=parse_list(a.tols),
+        solvers=parse_list(a.solvers, str),
+        peers=parse_list(a.peers, str),
+        repeats=a.repeats or None,
+    )

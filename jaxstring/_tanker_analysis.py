@@ -1,0 +1,430 @@
+"""Equilibria, linear stability and limit cycles of the vessel models.
+
+* `find_equilibria(scene)`: all static equilibria from a grid of starts (spec S1),
+  solved with optimistix under `vmap`, de-duplicated and classified by the
+  eigenvalues of the `jacfwd` Jacobian (spec S2).
+* `solve_equilibrium(scene, q0)`: one equilibrium from one start (continuation).
+* `stability(scene, y)`: eigenvalues and class of one equilibrium.
+* `measure_limit_cycle(traj, t_from)`: period, yaw amplitudes, span and tension
+  of a fishtailing run (spec S3a).
+* `hopf_sweep(...)`: leading eigenvalue of the aligned equilibrium over the astern
+  pull F_ast and the Hopf point where it crosses the imaginary axis (spec S3b).
+* `pitchfork_sweep(...)`: the same for the FPSO alone over the turret position
+  (spec S0).
+
+Equilibrium unknowns are `q = (x1, y1, psi1, x2, y2, psi2)` (positions in units
+of `LSCALE`) with zero velocities; the residual is the body loads (force/`FSCALE`,
+moment/(`FSCALE` `LSCALE`)), which vanish exactly where the accelerations do.
+"""
+
+import dataclasses
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._scene import Scene
+from ._vessel import Hawser, Tandem, hull_clearance, rot, wrap
+
+
+LSCALE = 100.0  # m
+FSCALE = 1.0e5  # N
+
+STABLE, SADDLE, OSCILLATORY = "stable", "saddle", "oscillatory unstable"
+
+
+def _n(scene):
+    return scene.model.n_vessels
+
+
+def state_from_q(q, n):
+    """Full state (zero velocities) from the equilibrium unknowns."""
+    q = q.reshape(n, 3)
+    eta = jnp.concatenate([q[:, :2] * LSCALE, q[:, 2:]], axis=1)
+    return jnp.concatenate([eta, jnp.zeros_like(eta)], axis=1).reshape(-1)
+
+
+def q_from_state(y, n):
+    eta = y.reshape(n, 6)[:, :3]
+    return jnp.concatenate([eta[:, :2] / LSCALE, eta[:, 2:]], axis=1).reshape(-1)
+
+
+def residual(q, scene: Scene):
+    """Scaled body loads at the zero-velocity state of `q` (zero at equilibrium)."""
+    n = _n(scene)
+    y = state_from_q(q, n)
+    f = scene.model.vector_field(0.0, y, scene.effects).reshape(n, 6)[:, 3:]
+    h = scene.model.hulls()
+    # At zero velocity nu_dot = M^{-1} tau exactly (the Coriolis terms vanish).
+    tau = f * jnp.stack([h.m11, h.m22, h.m66], axis=1)
+    return (tau / jnp.array([FSCALE, FSCALE, FSCALE * LSCALE])).reshape(-1)
+
+
+@eqx.filter_jit
+def _solve_batch(scene, q0s, rtol, atol, max_steps):
+    solver = optx.Newton(rtol=rtol, atol=atol)
+
+    def one(q0):
+        sol = optx.root_find(
+            residual, solver, q0, args=scene, max_steps=max_steps, throw=False
+        )
+        return sol.value, sol.result == optx.RESULTS.successful
+
+    q, ok = jax.vmap(one)(q0s)
+    res = jax.vmap(lambda q: jnp.max(jnp.abs(residual(q, scene))))(q)
+    return q, ok, res
+
+
+def solve_equilibria(scene: Scene, q0s, rtol=1e-10, atol=1e-10, max_steps=200):
+    """Newton solves from a batch of starts `q0s` (shape `(B, 3 n)`), under vmap.
+
+    Returns (states `(B, 6 n)`, converged mask, max |residual|)."""
+    q0s = jnp.asarray(q0s, dtype=jnp.float64)
+    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps)
+    n = _n(scene)
+    ys = jax.vmap(lambda q: state_from_q(q, n))(q)
+    return np.asarray(ys), np.asarray(ok) & (np.asarray(res) < 1e-6), np.asarray(res)
+
+
+def solve_equilibrium(scene: Scene, y_guess):
+    """One equilibrium from the state `y_guess` (its velocities are ignored).
+
+    Raises `RuntimeError` when Newton does not converge."""
+    n = _n(scene)
+    q0 = q_from_state(jnp.asarray(y_guess, dtype=jnp.float64), n)
+    ys, ok, res = solve_equilibria(scene, q0[None])
+    if not ok[0]:
+        raise RuntimeError(f"equilibrium solve failed (residual {res[0]:.3g}).")
+    return ys[0]
+
+
+def tandem_start(model: Tandem, l0, psi1, psi2):
+    """Start of the S1 grid: turret at the origin, shuttle bow `l0 + 1` m behind the
+    FPSO stern along the shuttle heading."""
+    e1 = jnp.stack([jnp.cos(psi1), jnp.sin(psi1)])
+    e2 = jnp.stack([jnp.cos(psi2), jnp.sin(psi2)])
+    p1 = -model.x_t * e1
+    P1 = p1 + model.x_h1 * e1
+    P2 = P1 - (l0 + 1.0) * e2
+    p2 = P2 - model.x_h2 * e2
+    z = jnp.zeros(3)
+    return jnp.concatenate([p1, psi1[None], z, p2, psi2[None], z])
+
+
+@eqx.filter_jit
+def _jacobian(scene, y):
+    return jax.jacfwd(lambda y: scene.model.vector_field(0.0, y, scene.effects))(y)
+
+
+def jacobian(scene: Scene, y):
+    """The dense Jacobian dF/dX of the scene's vector field at state `y`."""
+    return np.asarray(_jacobian(scene, jnp.asarray(y, dtype=jnp.float64)))
+
+
+def classify(eigs, tol=1e-9):
+    """Stable (all Re < 0), saddle (a real eigenvalue > 0) or oscillatory unstable
+    (a complex pair with Re > 0 and no real positive one)."""
+    eigs = np.asarray(eigs)
+    unstable = eigs[eigs.real > tol]
+    if unstable.size == 0:
+        return STABLE
+    real = np.abs(unstable.imag) <= 1e-9 * np.maximum(1.0, np.abs(unstable.real))
+    return SADDLE if np.any(real) else OSCILLATORY
+
+
+def stability(scene: Scene, y):
+    """(eigenvalues sorted by decreasing real part, class) at equilibrium `y`."""
+    eigs = np.linalg.eigvals(jacobian(scene, y))
+    # jnp.linalg.eigvals gives the same on CPU (host LAPACK); numpy avoids a
+    # recompilation per call here.
+    eigs = eigs[np.argsort(-eigs.real)]
+    return eigs, classify(eigs)
+
+
+@dataclasses.dataclass
+class Equilibrium:
+    """One equilibrium: state, hawser tension, clearance, eigenvalues, class."""
+
+    y: np.ndarray
+    tension: float
+    clearance: float
+    eigenvalues: np.ndarray
+    kind: str
+
+    @property
+    def admissible(self) -> bool:
+        return self.clearance > 0
+
+    @property
+    def stable(self) -> bool:
+        return self.kind == STABLE
+
+    @property
+    def headings_deg(self):
+        return np.degrees(np.asarray(wrap(jnp.asarray(self.y[2::6]))))
+
+
+def _dedupe(ys, pos_tol=1.0, ang_tol=0.01):
+    """Indices of the distinct states among `ys` (first of each cluster)."""
+    kept = []
+    for i, y in enumerate(ys):
+        eta = y.reshape(-1, 6)[:, :3]
+        dup = False
+        for k in kept:
+            ek = ys[k].reshape(-1, 6)[:, :3]
+            dpos = np.max(np.abs(eta[:, :2] - ek[:, :2]))
+            dang = np.max(np.abs(np.angle(np.exp(1j * (eta[:, 2] - ek[:, 2])))))
+            if dpos < pos_tol and dang < ang_tol:
+                dup = True
+                break
+        if not dup:
+            kept.append(i)
+    return kept
+
+
+def grid_starts(scene: Scene, n_grid=14):
+    """The S1 grid of starts over (psi1, psi2), shape `(n_grid^2, 6)` (in q)."""
+    hawser = _hawser(scene)
+    ang = jnp.linspace(-math.pi, math.pi, n_grid, endpoint=False)
+    p1, p2 = jnp.meshgrid(ang, ang, indexing="ij")
+    ys = jax.vmap(lambda a, b: tandem_start(scene.model, hawser.l0, a, b))(
+        p1.ravel(), p2.ravel()
+    )
+    return jax.vmap(lambda y: q_from_state(y, 2))(ys)
+
+
+def _hawser(scene):
+    hs = [e for e in scene.effects if isinstance(e, Hawser)]
+    if not hs:
+        raise ValueError("the scene has no `Hawser`: not a tandem equilibrium scene.")
+    return hs[0]
+
+
+@eqx.filter_jit
+def _equilibria_batch(scene, q0s, rtol, atol, max_steps):
+    """Solve from all starts and evaluate tension, clearance and Jacobian of each
+    solution, in one compiled call."""
+    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps)
+    hawser = _hawser(scene)
+    ys = jax.vmap(lambda q: state_from_q(q, 2))(q)
+
+    def props(y):
+        eta = y.reshape(2, 6)[:, :3]
+        T = hawser.tension(scene.model, eta, jnp.zeros((2, 3)))
+        return T, hull_clearance(scene.model, eta), _jacobian(scene, y)
+
+    T, clr, J = jax.vmap(props)(ys)
+    return ys, ok & (res < 1e-6), T, clr, J
+
+
+def _collect(ys, ok, T, clr, J, taut_tension):
+    ys, ok, T, clr, J = (np.asarray(a) for a in (ys, ok, T, clr, J))
+    keep = ok & (T > taut_tension)
+    ys, T, clr, J = ys[keep].copy(), T[keep], clr[keep], J[keep]
+    # Headings wrapped to (-pi, pi] for de-duplication and output.
+    ys[:, 2::6] = np.angle(np.exp(1j * ys[:, 2::6]))
+    out = []
+    for i in _dedupe(ys):
+        eigs = np.linalg.eigvals(J[i])
+        eigs = eigs[np.argsort(-eigs.real)]
+        out.append(
+            Equilibrium(
+                y=ys[i],
+                tension=float(T[i]),
+                clearance=float(clr[i]),
+                eigenvalues=eigs,
+                kind=classify(eigs),
+            )
+        )
+    out.sort(key=lambda e: (e.y[2], e.y[8]))
+    return out
+
+
+def find_equilibria(
+    scene: Scene, n_grid=14, taut_tension=1.0, rtol=1e-10, atol=1e-10, max_steps=200
+):
+    """All taut-hawser equilibria of a tandem scene (spec S1).
+
+    Newton from the `n_grid` x `n_grid` starts of `grid_starts`, under vmap; keeps
+    converged solutions with T_h > `taut_tension` N, de-duplicates them (1 m,
+    0.01 rad) and classifies each by the eigenvalues of its `jacfwd` Jacobian.
+    Returns a list of `Equilibrium`, sorted by FPSO heading.
+    """
+    if not isinstance(scene.model, Tandem):
+        raise ValueError("`find_equilibria` needs a Tandem scene.")
+    _hawser(scene)
+    out = _equilibria_batch(scene, grid_starts(scene, n_grid), rtol, atol, max_steps)
+    return _collect(*out, taut_tension)
+
+
+def find_equilibria_map(
+    scenes, n_grid=14, taut_tension=1.0, rtol=1e-10, atol=1e-10, max_steps=200
+):
+    """`find_equilibria` for several scenes of one structure (e.g. a wind map),
+    all solved in one vmapped, compiled call. Returns a list of lists."""
+    scenes = list(scenes)
+    batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
+    q0s = jnp.stack([grid_starts(sc, n_grid) for sc in scenes])
+    solve = eqx.filter_vmap(
+        lambda sc, q0: _equilibria_batch(sc, q0, rtol, atol, max_steps)
+    )
+    out = solve(batch, q0s)
+    return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
+
+
+def counts(equilibria):
+    """(taut, admissible, stable-and-admissible) counts of a list of equilibria."""
+    adm = [e for e in equilibria if e.admissible]
+    return len(equilibria), len(adm), sum(e.stable for e in adm)
+
+
+# ---------------------------------------------------------------------------
+# Limit cycles
+
+
+def _crossings(t, x):
+    """Up-crossing times of x through 0 (linear interpolation)."""
+    i = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
+    return t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i])
+
+
+def measure_limit_cycle(traj, t_from):
+    """Period and amplitudes of a (fishtailing) run over `t > t_from`.
+
+    Returns a dict: `period` (s, mean spacing of the up-crossings of the shuttle
+    heading about its mean), `shuttle_yaw`, `fpso_yaw` (half peak-to-peak, deg),
+    `lateral_excursion` (peak-to-peak east position of the shuttle, m), `span_min`,
+    `span_max` (m), `tension_max`, `tension_min` (N), `n_cycles`."""
+    n = int(traj.n_valid)
+    t = np.asarray(traj.ts)[:n]
+    m = t > t_from
+    t = t[m]
+    ys = np.asarray(traj.ys)[:n][m]
+    psi1 = np.unwrap(ys[:, 2])
+    psi2 = np.unwrap(ys[:, 8])
+    span = np.asarray(traj.span)[:n][m]
+    T = np.asarray(traj.tension)[:n][m]
+    x = psi2 - np.mean(psi2)
+    up = _crossings(t, x)
+    period = float(np.mean(np.diff(up))) if up.size >= 2 else float("nan")
+    return {
+        "period": period,
+        "n_cycles": max(int(up.size) - 1, 0),
+        "shuttle_yaw": float(np.degrees(np.ptp(psi2)) / 2),
+        "fpso_yaw": float(np.degrees(np.ptp(psi1)) / 2),
+        "lateral_excursion": float(np.ptp(ys[:, 7])),
+        "span_min": float(np.min(span)),
+        "span_max": float(np.max(span)),
+        "tension_min": float(np.min(T)),
+        "tension_max": float(np.max(T)),
+    }
+
+
+# ---------------------------------------------------------------------------
+# Parameter sweeps of the aligned equilibrium (S0, S3b)
+
+
+def _crossing_of(xs, values):
+    """First x where `values` goes from < 0 to >= 0 or from > 0 to <= 0 (linear)."""
+    xs, v = np.asarray(xs), np.asarray(values)
+    s = np.sign(v)
+    i = np.nonzero(s[:-1] * s[1:] <= 0)[0]
+    if i.size == 0:
+        return float("nan")
+    i = i[0]
+    return float(xs[i] - v[i] * (xs[i + 1] - xs[i]) / (v[i + 1] - v[i]))
+
+
+def leading_eigenvalues(scenes_and_states):
+    """Eigenvalue with the largest real part of each (scene, equilibrium)."""
+    out = []
+    for scene, y in scenes_and_states:
+        eigs, _ = stability(scene, y)
+        out.append(eigs[0])
+    return np.asarray(out)
+
+
+def hopf_sweep(make_scene, F_values):
+    """Leading eigenvalue of the aligned equilibrium over the astern pull.
+
+    `make_scene(F_ast)` returns a scene whose `y0` is (near) the aligned
+    equilibrium. Returns (F values, equilibria, leading eigenvalues, Hopf point
+    F* (N, linear interpolation of Re = 0), tension at F*)."""
+    eqs, lead = [], []
+    for F in F_values:
+        sc = make_scene(float(F))
+        y = solve_equilibrium(sc, sc.y0)
+        eigs, _ = stability(sc, y)
+        # Leading complex pair (the fishtail mode).
+        cplx = eigs[np.abs(eigs.imag) > 1e-9]
+        eqs.append(y)
+        lead.append(cplx[0] if cplx.size else eigs[0])
+    lead = np.asarray(lead)
+    F_star = _crossing_of(F_values, lead.real)
+    return np.asarray(F_values), np.asarray(eqs), lead, F_star
+
+
+def pitchfork_sweep(make_scene, x_values):
+    """Largest real eigenvalue of the heading-into-current FPSO equilibrium over the
+    turret position; returns (x values, leading eigenvalues, crossing x*)."""
+    lead = []
+    for x in x_values:
+        sc = make_scene(float(x))
+        y = solve_equilibrium(sc, sc.y0)
+        eigs, _ = stability(sc, y)
+        lead.append(eigs[0])
+    lead = np.asarray(lead)
+    return np.asarray(x_values), lead, _crossing_of(x_values, lead.real)
+
+
+def rotate_state(y, angle):
+    """Rotate a whole tandem state about the earth origin by `angle` (rad)."""
+    y = np.array(y, dtype=float).reshape(-1, 6)
+    R = np.asarray(rot(angle))
+    y[:, :2] = y[:, :2] @ R.T
+    y[:, 2] += angle
+    return y.reshape(-1)
+
+
+def controlled_metrics(traj, d_ref, X_max, N_max, t_after=3000.0):
+    """S4 acceptance quantities of a controlled run.
+
+    Returns a dict: `span_error` (max |d - d_ref| after `t_after`, m),
+    `heading_error` (max |y2| after `t_after`, deg), `span_min` (m),
+    `clearance_min` (m), `X_peak` (N), `N_peak` (N m), `psi1_final`,
+    `psi2_final` (deg), `X_final` (N), `N_final` (N m), `ok` (all four acceptance
+    criteria: < 0.5 m, < 0.5 deg, clearance > 0, |X| <= X_max and |N| <= N_max)."""
+    n = int(traj.n_valid)
+    t = np.asarray(traj.ts)[:n]
+    late = t >= t_after
+    span = np.asarray(traj.span)[:n]
+    y2 = np.degrees(np.asarray(traj.heading_error)[:n])
+    ctl = np.asarray(traj.control)[:n]
+    hd = np.degrees(np.asarray(traj.headings)[:n])
+    out = {
+        "span_error": float(np.max(np.abs(span[late] - d_ref)))
+        if late.any()
+        else np.nan,
+        "heading_error": float(np.max(np.abs(y2[late]))) if late.any() else np.nan,
+        "span_min": float(np.min(span)),
+        "clearance_min": float(np.min(np.asarray(traj.clearance)[:n])),
+        "X_peak": float(np.max(np.abs(ctl[:, 0]))),
+        "N_peak": float(np.max(np.abs(ctl[:, 1]))),
+        "psi1_final": float(hd[-1, 0]),
+        "psi2_final": float(hd[-1, 1]),
+        "X_final": float(ctl[-1, 0]),
+        "N_final": float(ctl[-1, 1]),
+    }
+    out["ok"] = bool(
+        traj.ok
+        and n == len(np.asarray(traj.ts))
+        and out["span_error"] < 0.5
+        and out["heading_error"] < 0.5
+        and out["clearance_min"] > 0
+        and out["X_peak"] <= float(X_max)
+        and out["N_peak"] <= float(N_max)
+    )
+    return out

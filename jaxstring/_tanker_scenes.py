@@ -1,0 +1,237 @@
+"""Named scenes of the FPSO + shuttle tanker tandem (spec section 6, S0-S4).
+
+Default environment: current U_c = 1 m/s flowing south (coming from the north);
+wind blowing toward `pi + Delta_w`, so `Delta_w` is the angle between where the
+wind and where the current come from.
+"""
+
+import math
+
+import jax.numpy as jnp
+
+from ._control import ComputedForcePD, NonlinearCompensator
+from ._scene import Scene
+from ._validate import check_choice, check_finite, check_nonnegative, check_positive
+from ._vessel import (
+    AbstractVesselLoad,
+    ConstantThrust,
+    Hawser,
+    MooredFPSO,
+    OCIMFWind,
+    ShortWingCurrent,
+    Tandem,
+    TurretMooring,
+    current_velocity,
+    fpso_hull,
+    shuttle_hull,
+)
+
+
+# S4 environments: name -> (V_w m/s, Delta_w deg)
+ENVIRONMENTS = {
+    "current": (0.0, 0.0),
+    "wind5_0": (5.0, 0.0),
+    "wind15_90": (15.0, 90.0),
+    "wind15_180": (15.0, 180.0),
+}
+
+
+def environment(U_c=1.0, V_w=0.0, Delta_w_deg=0.0, beta_c=math.pi):
+    """Current (and wind when `V_w` > 0) effects of the spec's environment."""
+    check_nonnegative("U_c", U_c, "m/s")
+    check_nonnegative("V_w", V_w, "m/s")
+    check_finite("Delta_w_deg", Delta_w_deg)
+    effects = (ShortWingCurrent(speed=U_c, direction=beta_c),)
+    if not (isinstance(V_w, (int, float)) and V_w == 0.0):
+        # Spec section 6: the wind blows toward beta_w = pi + Delta_w (beta_c = pi).
+        beta_w = beta_c + math.radians(Delta_w_deg)
+        effects += (OCIMFWind(speed=V_w, direction=beta_w),)
+    return effects
+
+
+def tandem_model(x_t=None, x_h1=None, x_h2=None, fpso=None, shuttle=None) -> Tandem:
+    """The spec's tandem (defaults: x_t = 0.40 L1, x_h1 = -L1/2, x_h2 = +L2/2)."""
+    fpso = fpso_hull() if fpso is None else fpso
+    shuttle = shuttle_hull() if shuttle is None else shuttle
+    kw = {}
+    for k, v in (("x_t", x_t), ("x_h1", x_h1), ("x_h2", x_h2)):
+        if v is not None:
+            kw[k] = v
+    return Tandem(fpso=fpso, shuttle=shuttle, **kw)
+
+
+def _axial_loads(model, effects, psi):
+    """Surge loads on each vessel at rest, heading `psi`, from current and wind."""
+    n = model.n_vessels
+    eta = jnp.stack([jnp.array([0.0, 0.0, psi])] * n)
+    nu = jnp.zeros((n, 3))
+    vc = current_velocity(effects)
+    X = jnp.zeros(n)
+    for e in effects:
+        if isinstance(e, AbstractVesselLoad) and not isinstance(
+            e, (Hawser, TurretMooring)
+        ):
+            X = X + e.loads(0.0, model, eta, nu, vc)[:, 0]
+    return X
+
+
+def _mooring_offset(mooring: TurretMooring, F):
+    """Turret offset r (m) where k_m (1 + r^2/rho_m^2) r = F."""
+    r = F / mooring.k_m
+    for _ in range(40):
+        g = mooring.k_m * (1 + r**2 / mooring.rho_m**2) * r - F
+        r = r - g / (mooring.k_m * (1 + 3 * r**2 / mooring.rho_m**2))
+    return r
+
+
+def aligned_equilibrium(model, effects, F_ast=0.0, heading=0.0):
+    """The aligned equilibrium (both vessels heading `heading`, shuttle astern) for
+    loads along that axis (current, and wind along the current): exact, from the
+    surge balances. Returns the state."""
+    hawsers = [e for e in effects if isinstance(e, Hawser)]
+    moorings = [e for e in effects if isinstance(e, TurretMooring)]
+    X = _axial_loads(model, effects, heading)
+    e = jnp.stack([jnp.cos(heading), jnp.sin(heading)])
+    if model.n_vessels == 1:
+        r = _mooring_offset(moorings[0], -X[0])
+        p1 = -(model.x_t + r) * e
+        return jnp.concatenate([p1, jnp.array([heading, 0.0, 0.0, 0.0])])
+    # Floor the tension: with a head wind stronger than the current drag there is
+    # no aligned equilibrium, and this state is only a start (1 kN).
+    T = jnp.maximum(-X[1] + F_ast, 1.0e3)
+    d = hawsers[0].l0 + hawsers[0].stretch_for_tension(T)
+    r = _mooring_offset(moorings[0], -X[0] + T)
+    p1 = -(model.x_t + r) * e
+    P1 = p1 + model.x_h1 * e
+    p2 = P1 - (d + model.x_h2) * e
+    z = jnp.zeros(3)
+    h = jnp.array([heading])
+    return jnp.concatenate([p1, h, z, p2, h, z])
+
+
+def _perturb_shuttle_heading(model, y, angle):
+    """Turn the shuttle by `angle` (rad) about its bow fairlead."""
+    psi = y[8]
+    P2 = y[6:8] + model.x_h2 * jnp.stack([jnp.cos(psi), jnp.sin(psi)])
+    psi_new = psi + angle
+    p2 = P2 - model.x_h2 * jnp.stack([jnp.cos(psi_new), jnp.sin(psi_new)])
+    return y.at[6:8].set(p2).at[8].set(psi_new)
+
+
+def tandem_fpso_alone(
+    x_t_over_L=0.40, U_c=1.0, psi0_deg=10.0, t1=20000.0, k_m=1.0e5, c_m=6.0e5
+) -> Scene:
+    """S0: the FPSO alone on its turret in current (hawser removed).
+
+    Starts from the heading-into-current equilibrium turned by `psi0_deg` about
+    the turret; forward of the critical turret position (0.355 L1) it returns.
+    """
+    check_positive("U_c", U_c, "m/s")
+    check_finite("psi0_deg", psi0_deg)
+    fpso = fpso_hull()
+    model = MooredFPSO(fpso=fpso, x_t=x_t_over_L * fpso.L)
+    effects = (ShortWingCurrent(speed=U_c), TurretMooring(k_m=k_m, c_m=c_m))
+    y = aligned_equilibrium(model, effects)
+    a = math.radians(psi0_deg)
+    PT = y[:2] + model.x_t * jnp.array([1.0, 0.0])
+    y = y.at[:2].set(PT - model.x_t * jnp.array([math.cos(a), math.sin(a)]))
+    y = y.at[2].set(a)
+    return Scene(model=model, effects=effects, y0=y, t1=t1, name="tandem-fpso-alone")
+
+
+def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None):
+    eff = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Delta_w_deg)
+    hawser = Hawser(l0=l0, k_h=k_h) if hawser is None else hawser
+    eff = eff + (hawser, TurretMooring())
+    if F_ast is not None:
+        eff = eff + (ConstantThrust(F_ast=F_ast),)
+    return eff
+
+
+def tandem_equilibria(
+    V_w=0.0, Delta_w_deg=0.0, U_c=1.0, l0=80.0, k_h=2.0e5, x_t=None, t1=1.0e4
+) -> Scene:
+    """S1/S2: the tandem in current and wind, no thrust; `y0` is the aligned
+    state (exact equilibrium for the current alone or wind along it). Use
+    `find_equilibria(scene)` for all equilibria."""
+    model = tandem_model(x_t=x_t)
+    eff = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None)
+    y0 = aligned_equilibrium(model, eff)
+    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-equilibria")
+
+
+def tandem_fishtail(
+    F_ast=0.0, perturbation_deg=2.5, t1=60000.0, U_c=1.0, l0=80.0, k_h=2.0e5
+) -> Scene:
+    """S3a: current only, constant astern pull `F_ast` (N), from the aligned
+    equilibrium with the shuttle turned by `perturbation_deg` about its bow."""
+    check_finite("perturbation_deg", perturbation_deg)
+    check_positive("U_c", U_c, "m/s")
+    model = tandem_model()
+    eff = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
+    y0 = aligned_equilibrium(model, eff, F_ast=F_ast)
+    y0 = _perturb_shuttle_heading(model, y0, math.radians(perturbation_deg))
+    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail")
+
+
+def tandem_hopf(F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0) -> Scene:
+    """S3b: the fishtail scene at astern pull `F_ast` (N); the Hopf point is near
+    43 kN (spec). Sweep `F_ast` with `hopf_sweep`."""
+    sc = tandem_fishtail(F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c)
+    return Scene(
+        model=sc.model, effects=sc.effects, y0=sc.y0, t1=t1, name="tandem-hopf"
+    )
+
+
+def controlled_start(model, span=81.0, shuttle_offset_deg=10.0):
+    """S4 start: FPSO heading north with its turret at the origin, shuttle bow
+    `span` m south of the FPSO stern, shuttle turned `shuttle_offset_deg`."""
+    a = math.radians(shuttle_offset_deg)
+    p1 = jnp.stack([-model.x_t, jnp.zeros(())])
+    P1 = p1 + jnp.stack([model.x_h1, jnp.zeros(())])
+    P2 = P1 - jnp.stack([jnp.asarray(span), jnp.zeros(())])
+    p2 = P2 - model.x_h2 * jnp.array([math.cos(a), math.sin(a)])
+    z = jnp.zeros(3)
+    return jnp.concatenate([p1, jnp.zeros(1), z, p2, jnp.array([a]), z])
+
+
+def tandem_controlled(
+    env="current",
+    law="B",
+    t1=4000.0,
+    T_ref=300.0e3,
+    omega=0.05,
+    zeta=1.0,
+    span0=81.0,
+    shuttle_offset_deg=10.0,
+    X_max=1.5e6,
+    N_max=1.0e8,
+    U_c=1.0,
+) -> Scene:
+    """S4: the shuttle under the nonlinear compensator (law "B") or the computed
+    force PD (law "A"), in one of `ENVIRONMENTS`.
+
+    The span reference is d_ref = l0 + delta(T_ref) (81.47 m at 300 kN); the
+    heading reference is the hawser bearing. Gains: K_P = omega^2, K_D = 2 zeta
+    omega on both channels."""
+    check_choice("env", env, tuple(ENVIRONMENTS))
+    check_choice("law", law, ("A", "B"))
+    check_positive("T_ref", T_ref, "N")
+    check_positive("omega", omega, "rad/s")
+    check_positive("zeta", zeta)
+    check_positive("span0", span0, "m")
+    V_w, Dw = ENVIRONMENTS[env]
+    model = tandem_model()
+    hawser = Hawser()
+    d_ref = hawser.l0 + hawser.stretch_for_tension(T_ref)
+    cls = NonlinearCompensator if law == "B" else ComputedForcePD
+    ctl = cls.from_bandwidth(
+        omega=omega, zeta=zeta, d_ref=d_ref, X_max=X_max, N_max=N_max
+    )
+    eff = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw) + (
+        hawser,
+        TurretMooring(),
+        ctl,
+    )
+    y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
+    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled")
