@@ -21,12 +21,11 @@ import numpy as np
 
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from tests.helpers import FORMULATIONS, fitted_order, run, zero_crossings  # noqa: E402
-from tests.test_physics import G, HARD_CASES, _axial_mode_scene  # noqa: E402
-
 import jax.numpy as jnp  # noqa: E402
 
 import jaxstring as js  # noqa: E402
+from tests.helpers import FORMULATIONS, fitted_order, run, zero_crossings  # noqa: E402
+from tests.test_physics import HARD_CASES, G, _axial_mode_scene  # noqa: E402
 
 
 def main(quick: bool = False) -> str:
