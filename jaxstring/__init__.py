@@ -25,6 +25,32 @@ from ._string import (
     NaturalAngleString as NaturalAngleString,
     NaturalTangentString as NaturalTangentString,
 )
+from ._hydro import (
+    AbstractCurrent as AbstractCurrent,
+    AbstractTetherLoad as AbstractTetherLoad,
+    Buoyancy as Buoyancy,
+    DepthProfileCurrent as DepthProfileCurrent,
+    Drag as Drag,
+    FunctionCurrent as FunctionCurrent,
+    TetherKinematics as TetherKinematics,
+    UniformCurrent as UniformCurrent,
+    Weight as Weight,
+)
+from ._tether import (
+    AbstractEnd as AbstractEnd,
+    AbstractTether as AbstractTether,
+    AceamTether as AceamTether,
+    arc_state as arc_state,
+    CoupledEnd as CoupledEnd,
+    EndKinematics as EndKinematics,
+    ExactTether as ExactTether,
+    FixedEnd as FixedEnd,
+    FreeEnd as FreeEnd,
+    hanging_state as hanging_state,
+    LmsTether as LmsTether,
+    PiecewiseLinear as PiecewiseLinear,
+    PrescribedEnd as PrescribedEnd,
+)
 from ._trajectory import Trajectory as Trajectory
 from ._vessel import (
     AbstractActuator as AbstractActuator,

@@ -3,6 +3,7 @@
 import math
 
 from ._effects import EFFECTS, Gravity, KelvinVoigt, Slack
+from ._tether_scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
 from ._tanker_scenes import (
     ENVIRONMENTS as TANDEM_ENVIRONMENTS,
     tandem_controlled as tandem_controlled,

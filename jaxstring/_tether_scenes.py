@@ -1,0 +1,205 @@
+"""Named tether scenes reproducing Blintsov (2017), section 5 and Table 1.
+
+* ``tether_fixed``: fixed released length (section 5.1, Fig 5).
+* ``tether_winch``: the same motion with haul-in during the rise and pay-out during the
+  forward motion (Fig 6).
+
+Table 1: L = 100 m, N = 101, rho = 1024 kg/m^3, d = 10 mm, c_n = 1, c_t = 0.1, c_l = 0;
+T = 0.1 s, T1 = 0.025 s, k = 10000 N. Neutral buoyancy (F_g = -F_b), uniform current
+v_c = (-1, 0, 0) m/s; x north, z up. Root fixed at the origin; running end at
+(0, 0, -50) m at t0 = 0; 0-10 s still; 10-35 s rising at 1 m/s; 35-45 s still; 45-70 s
+moving forward (+x) at 1 m/s. Integrated with Dormand-Prince ("dopri5").
+
+Choices the paper leaves open (stated here so that they can be changed):
+
+- initial shape: an arc of the full length through both mounts, bulging downstream
+  (-x), at rest; the line settles during the first 10 s as in the paper;
+- added mass coefficient C_a = 1 (a circular cylinder moving normal to its axis);
+- end-link law F = k (l - g)/L_link with L_link = L/(N + 1) (the paper's
+  proportional law; it also holds for a zero target length on the drum);
+- haul-in speed during the rise: 0.5 m/s (not given in the paper; with the stated
+  0.5 m/s pay-out the released length returns to the full 100 m at t = 70 s).
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._hydro import Buoyancy, Drag, UniformCurrent, Weight
+from ._scene import Scene
+from ._tether import (
+    TETHER_METHODS,
+    FixedEnd,
+    PiecewiseLinear,
+    PrescribedEnd,
+    arc_state,
+)
+from ._validate import check_choice, check_int, check_nonnegative, check_positive
+
+
+PAPER_TIMES = (0.0, 10.0, 35.0, 45.0, 70.0)
+PAPER_FAST_PATH = (
+    (0.0, 0.0, -50.0),
+    (0.0, 0.0, -50.0),
+    (0.0, 0.0, -25.0),
+    (0.0, 0.0, -25.0),
+    (25.0, 0.0, -25.0),
+)
+
+
+def _tether_model(
+    method,
+    *,
+    N,
+    L,
+    d,
+    rho,
+    added_mass,
+    T,
+    T1,
+    k,
+    k_lms,
+    c_lms,
+    omega,
+    end_links,
+    root,
+    fast,
+    released,
+    feedforward,
+):
+    check_choice("method", method, tuple(TETHER_METHODS))
+    mass_per_length = rho * np.pi * d**2 / 4  # neutral buoyancy
+    common = dict(
+        L=L,
+        d=d,
+        mass_per_length=mass_per_length,
+        rho_water=rho,
+        added_mass=added_mass,
+        N=N,
+        root=root,
+        fast=fast,
+        released=released,
+    )
+    if method == "aceam":
+        return TETHER_METHODS[method](
+            T=T, T1=T1, k=k, feedforward=feedforward, **common
+        )
+    if method == "exact":
+        return TETHER_METHODS[method](omega=omega, k=k, end_links=end_links, **common)
+    k_lms = 40.0 * k if k_lms is None else k_lms
+    return TETHER_METHODS[method](k=k_lms, c=c_lms, **common)
+
+
+def _check_common(N, L, d, rho, t1):
+    check_int("N", N, 2)
+    check_positive("L", L, "m")
+    check_positive("d", d, "m")
+    check_positive("rho", rho, "kg/m^3")
+    check_positive("t1", t1, "s")
+
+
+def tether_fixed(
+    method: str = "aceam",
+    N: int = 101,
+    L: float = 100.0,
+    d: float = 0.01,
+    rho: float = 1024.0,
+    c_n: float = 1.0,
+    c_t: float = 0.1,
+    c_l: float = 0.0,
+    T: float = 0.1,
+    T1: float = 0.025,
+    k: float = 1e4,
+    current=(-1.0, 0.0, 0.0),
+    g: float = 9.81,
+    added_mass: float = 1.0,
+    t1: float = 70.0,
+    times=PAPER_TIMES,
+    fast_path=PAPER_FAST_PATH,
+    smoothing: float = 0.0,
+    k_lms=None,
+    c_lms: float = 0.0,
+    omega: float = 20.0,
+    end_links: str = "rigid",
+    feedforward: bool = False,
+    released=None,
+    name: str = "tether-fixed",
+) -> Scene:
+    """The paper's tether at a fixed released length (section 5.1, Fig 5).
+
+    **Arguments:**
+
+    - `method`: link tensions from `"aceam"` (the paper's regulator), `"exact"`
+      (constraint tensions) or `"lms"` (springs, k_lms = 40 k unless given).
+    - `N` (elements, >= 2), `L` (m), `d` (m), `rho` (kg/m^3): Table 1.
+    - `c_n`, `c_t`, `c_l`: drag coefficients. `current`: uniform water velocity, m/s.
+    - `T`, `T1` (s), `k` (N): ACEAM regulator and end-link stiffness (Table 1).
+    - `g`: m/s^2. `added_mass`: coefficient C_a. `t1`: end time, s.
+    - `times` (s, strictly increasing), `fast_path` (m, one (x, y, z) per time): the
+      running-end schedule, piecewise linear; `smoothing` (s) ramps its velocity.
+    - `k_lms` (N), `c_lms` (N s): LMS springs. `omega` (1/s), `end_links`: exact.
+    - `feedforward`: ACEAM reference model with the target's rates.
+    - `released`: released length at `times`, m (None: fixed at `L`).
+    """
+    _check_common(N, L, d, rho, t1)
+    check_nonnegative("added_mass", added_mass)
+    fast = PrescribedEnd(times, fast_path, smoothing=smoothing)
+    schedule = None
+    if released is not None:
+        schedule = PiecewiseLinear(times, released, smoothing=smoothing)
+    model = _tether_model(
+        method,
+        N=N,
+        L=L,
+        d=d,
+        rho=rho,
+        added_mass=added_mass,
+        T=T,
+        T1=T1,
+        k=k,
+        k_lms=k_lms,
+        c_lms=c_lms,
+        omega=omega,
+        end_links=end_links,
+        root=FixedEnd(jnp.zeros(3)),
+        fast=fast,
+        released=schedule,
+        feedforward=feedforward,
+    )
+    effects = (
+        Weight(g=g),
+        Buoyancy(g=g),
+        Drag(c_t=c_t, c_n=c_n, c_l=c_l, current=UniformCurrent(current)),
+    )
+    y0 = arc_state(model, bulge=(-1.0, 0.0, 0.0), t0=float(np.asarray(times)[0]))
+    return Scene(model=model, effects=effects, y0=y0, t1=t1, name=f"{name}/{method}")
+
+
+def tether_winch(
+    method: str = "aceam",
+    haul_speed: float = 0.5,
+    payout_speed: float = 0.5,
+    times=PAPER_TIMES,
+    released=None,
+    **kw,
+) -> Scene:
+    """The paper's tether with pay-out and haul-in (section 4.5, Fig 6).
+
+    The released length is L (0-10 s), hauled in at `haul_speed` m/s while the
+    running end rises (10-35 s), held (35-45 s) and paid out at `payout_speed` m/s
+    during the forward motion (45-70 s); or any `released` schedule at `times` (m).
+    Other arguments as `tether_fixed`.
+    """
+    check_nonnegative("haul_speed", haul_speed, "m/s")
+    check_nonnegative("payout_speed", payout_speed, "m/s")
+    if released is None:
+        L = kw.get("L", 100.0)
+        t = np.asarray(times, float)
+        if t.shape != (5,):
+            raise ValueError(
+                "`times` must have the paper's 5 knots when `released` is not given."
+            )
+        hauled = L - haul_speed * (t[2] - t[1])
+        released = (L, L, hauled, hauled, hauled + payout_speed * (t[4] - t[3]))
+    return tether_fixed(
+        method=method, times=times, released=released, name="tether-winch", **kw
+    )
