@@ -25,6 +25,13 @@ from ._string import (
     NaturalAngleString as NaturalAngleString,
     NaturalTangentString as NaturalTangentString,
 )
+from ._fit import (
+    fit as fit,
+    FitResult as FitResult,
+    gauss_newton as gauss_newton,
+    value_and_grad as value_and_grad,
+)
+from ._sweep import sweep as sweep, SweepResult as SweepResult
 from ._hydro import (
     AbstractCurrent as AbstractCurrent,
     AbstractTetherLoad as AbstractTetherLoad,

@@ -1,0 +1,765 @@
+"""fit: gradient-based identification and tuning of scene parameters with optax.
+
+The same scene that `simulate` integrates is the model that is fitted: chosen array
+leaves of the scene (a stiffness, a damping constant, a drag coefficient, a
+controller gain) are the unknowns, every other leaf stays frozen. The split is an
+`eqx.partition` with a boolean filter spec (equinox FAQ, "frozen layers"); one
+optimiser step -- simulate, loss, gradient, optax update -- is one `eqx.filter_jit`.
+
+Positive parameters are optimised as log p: the update is then relative (a step of
+0.05 changes EA = 1e6 N and alpha = 0.01 s by the same 5 %), and p can never cross 0.
+
+Gradients go through the solver ("discretise then optimise"): diffrax's
+`RecursiveCheckpointAdjoint` by default, with as many checkpoints as the forward run
+takes steps (`checkpoints="auto"`), so the backward pass recomputes each step about
+once. `DirectAdjoint`, `BacksolveAdjoint` and forward mode (`ForwardMode`, best for
+one or two parameters and for Jacobians of residuals) can be chosen by name.
+"""
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.flatten_util as jfu
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+import optax
+
+from ._projection import ProjectedSolver
+from ._scene import Scene, scene_vector_field
+from ._simulate import _solve, observables
+from ._solvers import build_solver, check_solver, is_adaptive
+from ._trajectory import Trajectory
+from ._validate import check_choice, check_int, check_positive
+
+
+ADJOINTS = ("recursive", "direct", "backsolve", "forward")
+
+
+# --------------------------------------------------------------------------------------
+# Naming parameters of a scene
+
+
+def _key_name(key) -> str | None:
+    return key.name if isinstance(key, jtu.GetAttrKey) else None
+
+
+def _follow(obj, path):
+    for key in path:
+        if isinstance(key, jtu.GetAttrKey):
+            obj = getattr(obj, key.name)
+        elif isinstance(key, jtu.SequenceKey):
+            obj = obj[key.idx]
+        elif isinstance(key, jtu.DictKey):
+            obj = obj[key.key]
+        else:  # pragma: no cover - scenes hold only modules, tuples and dicts
+            raise ValueError(f"cannot follow path element {key!r}")
+    return obj
+
+
+class _Getter(eqx.Module):
+    """`scene -> leaf` along a fixed path (hashable, so usable as a static arg)."""
+
+    path: tuple = eqx.field(static=True)
+    label: str = eqx.field(static=True)
+
+    def __call__(self, scene):
+        return _follow(scene, self.path)
+
+
+def parameter_names(scene) -> list[str]:
+    """Paths of all array leaves of `scene` that `fit` and `sweep` can select,
+    e.g. `"model.EA"`, `"effects[1].alpha"`."""
+    leaves = jtu.tree_flatten_with_path(scene)[0]
+    return [jtu.keystr(p)[1:] for p, x in leaves if eqx.is_inexact_array(x)]
+
+
+def resolve(scene, param) -> _Getter:
+    """Return a getter `scene -> leaf` for one parameter specification.
+
+    `param` is a callable (`lambda s: s.effects[1].alpha`), a field name (`"alpha"`,
+    `"EA"`: must be unique in the scene), a name qualified by the type that holds it
+    (`"KelvinVoigt.alpha"`, `"Gravity.g"`) or a path (`"model.EA"`,
+    `"effects[1].alpha"`). Raises `ValueError` when it names nothing or several leaves.
+    """
+    leaves = jtu.tree_flatten_with_path(scene)[0]
+    entries = []
+    for path, leaf in leaves:
+        if not eqx.is_inexact_array(leaf):
+            continue
+        owner = _follow(scene, path[:-1])
+        entries.append((path, jtu.keystr(path)[1:], _key_name(path[-1]), owner, leaf))
+    if callable(param) and not isinstance(param, str):
+        target = param(scene)
+        hits = [e for e in entries if e[4] is target]
+        if len(hits) != 1:
+            raise ValueError(
+                "`params`: a callable must return one floating-point array leaf of the "
+                f"scene (like `lambda s: s.model.EA`); valid leaves: "
+                f"{', '.join(parameter_names(scene))}."
+            )
+        return _Getter(path=hits[0][0], label=hits[0][2] or hits[0][1])
+    if not isinstance(param, str):
+        raise ValueError(f"`params` entries must be names or callables; got {param!r}.")
+    hits = [e for e in entries if e[1] == param]
+    if not hits:
+        hits = [e for e in entries if e[2] == param]
+    if not hits and "." in param:
+        cls, _, field = param.rpartition(".")
+        hits = [e for e in entries if e[2] == field and type(e[3]).__name__ == cls]
+    if len(hits) == 1:
+        return _Getter(path=hits[0][0], label=param)
+    names = ", ".join(repr(n) for n in parameter_names(scene))
+    if not hits:
+        raise ValueError(f"unknown parameter {param!r}; the scene has: {names}.")
+    raise ValueError(
+        f"parameter {param!r} is ambiguous ({', '.join(e[1] for e in hits)}); "
+        f"name it by path or type, e.g. {hits[0][1]!r} or "
+        f"'{type(hits[0][3]).__name__}.{param}'."
+    )
+
+
+def filter_spec(scene, getters) -> Any:
+    """Boolean tree like `scene`: True at the chosen leaves (for `eqx.partition`)."""
+    spec = jtu.tree_map(lambda _: False, scene)
+    return eqx.tree_at(
+        lambda s: [g(s) for g in getters], spec, replace=[True] * len(getters)
+    )
+
+
+# --------------------------------------------------------------------------------------
+# A solve that can be differentiated, with a choice of adjoint
+
+
+def make_adjoint(adjoint, checkpoints=None):
+    """A diffrax adjoint from a name (`"recursive"`, `"direct"`, `"backsolve"`,
+    `"forward"`) or an `diffrax.AbstractAdjoint` instance (returned as is)."""
+    if isinstance(adjoint, dfx.AbstractAdjoint):
+        return adjoint
+    if adjoint is None:
+        adjoint = "recursive"
+    check_choice("adjoint", adjoint, ADJOINTS)
+    if adjoint == "recursive":
+        return dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
+    if adjoint == "direct":
+        return dfx.DirectAdjoint()
+    if adjoint == "backsolve":
+        return dfx.BacksolveAdjoint()
+    return dfx.ForwardMode()
+
+
+def _is_default_adjoint(adjoint) -> bool:
+    return (
+        type(adjoint) is dfx.RecursiveCheckpointAdjoint and adjoint.checkpoints is None
+    )
+
+
+class _ProjectedSolverAD(ProjectedSolver):
+    # diffrax's ForwardMode/DirectAdjoint read `solver.scan_kind` (the wrapped
+    # solver's, set above); ProjectedSolver does not forward it yet.
+    @property
+    def scan_kind(self):
+        return getattr(self.solver, "scan_kind", None)
+
+
+@eqx.filter_jit
+def _solve_adjoint(
+    scene,
+    ts,
+    rtol,
+    atol,
+    dt0,
+    newton_rtol,
+    newton_atol,
+    solver,
+    adaptive,
+    max_steps,
+    project,
+    adjoint,
+):
+    # A copy of jaxstring._simulate._solve with an `adjoint` argument (and no progress
+    # meter); used only for non-default adjoints until `_solve` takes `adjoint=`.
+    dfx_solver = build_solver(solver, newton_rtol, newton_atol)
+    if project and scene.model.projects:
+        # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
+        # differentiate in forward mode / with DirectAdjoint, but cannot see through
+        # the wrapper: do it before wrapping.
+        kind = {dfx.ForwardMode: "lax", dfx.DirectAdjoint: "bounded"}.get(type(adjoint))
+        if kind is not None and isinstance(dfx_solver, dfx.AbstractRungeKutta):
+            if dfx_solver.scan_kind is None:
+                dfx_solver = eqx.tree_at(
+                    lambda s: s.scan_kind, dfx_solver, kind, is_leaf=lambda x: x is None
+                )
+        dfx_solver = _ProjectedSolverAD(dfx_solver)
+        saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))
+    else:
+        saveat = dfx.SaveAt(ts=ts)
+    controller = (
+        dfx.PIDController(rtol=rtol, atol=atol) if adaptive else dfx.ConstantStepSize()
+    )
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(scene_vector_field),
+        dfx_solver,
+        t0=scene.t0,
+        t1=scene.t1,
+        dt0=dt0,
+        y0=scene.y0,
+        args=scene,
+        saveat=saveat,
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=False,
+        adjoint=adjoint,
+    )
+    ys = sol.ys
+    finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
+    n_valid = jnp.sum(jnp.cumprod(finite))
+    safe_ys = jnp.where(finite.reshape((-1,) + (1,) * (ys.ndim - 1)), ys, scene.y0)
+    obs = observables(scene, ts, safe_ys)
+
+    def mask(x):
+        return jnp.where(finite.reshape((-1,) + (1,) * (x.ndim - 1)), x, jnp.nan)
+
+    stats = {
+        key: sol.stats[key]
+        for key in (
+            "num_steps",
+            "num_accepted_steps",
+            "num_rejected_steps",
+            "max_steps",
+        )
+    }
+    t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
+    return Trajectory(
+        ts=ts,
+        ys=ys,
+        obs=jtu.tree_map(mask, obs),
+        result=sol.result,
+        stats=stats,
+        t_end=t_end,
+        n_valid=n_valid,
+    )
+
+
+class SolveConfig(eqx.Module):
+    """Solver settings of a differentiable or batched solve (all static).
+
+    Same meaning as the arguments of `jaxstring.simulate`; `adjoint` is a diffrax
+    adjoint (see `make_adjoint`).
+    """
+
+    solver: Any = eqx.field(static=True, default="kvaerno5")
+    rtol: float = eqx.field(static=True, default=1e-6)
+    atol: float = eqx.field(static=True, default=1e-6)
+    n_save: int = eqx.field(static=True, default=201)
+    dt0: float | None = eqx.field(static=True, default=None)
+    newton_rtol: float | None = eqx.field(static=True, default=None)
+    newton_atol: float | None = eqx.field(static=True, default=None)
+    max_steps: int = eqx.field(static=True, default=200_000)
+    project: bool = eqx.field(static=True, default=True)
+    adjoint: Any = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        check_solver(self.solver)
+        check_positive("rtol", self.rtol)
+        check_positive("atol", self.atol)
+        check_int("n_save", self.n_save, 2)
+        check_int("max_steps", self.max_steps, 1)
+        if self.dt0 is not None:
+            check_positive("dt0", self.dt0, "s")
+        for name in ("newton_rtol", "newton_atol"):
+            if getattr(self, name) is not None:
+                check_positive(name, getattr(self, name))
+        if self.adjoint is not None and not isinstance(
+            self.adjoint, dfx.AbstractAdjoint
+        ):
+            raise ValueError(
+                "`adjoint` must be a diffrax adjoint (use make_adjoint(name)); "
+                f"got {self.adjoint!r}."
+            )
+
+
+def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
+    """Integrate `scene` like `simulate`, usable inside `jax.grad`, `jax.vmap`, `jit`.
+
+    No check here looks at array values (the scene may be traced); `config` was
+    checked when it was built. `ts` defaults to `config.n_save` points over the span.
+    """
+    if ts is None:
+        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    adaptive = is_adaptive(config.solver)
+    dt0 = config.dt0
+    if not adaptive and dt0 is None:
+        dt0 = 0.005
+    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
+    dt0 = None if dt0 is None else f64(dt0)
+    nr = config.rtol if config.newton_rtol is None else config.newton_rtol
+    na = config.atol if config.newton_atol is None else config.newton_atol
+    adjoint = make_adjoint(config.adjoint)
+    if isinstance(adjoint, dfx.BacksolveAdjoint) and scene.model.projects:
+        raise ValueError(
+            "`adjoint='backsolve'` does not fit a model that projects onto its "
+            f"constraint ({type(scene.model).__name__}); use 'recursive'."
+        )
+    args = (
+        scene,
+        ts,
+        f64(config.rtol),
+        f64(config.atol),
+        dt0,
+        f64(nr),
+        f64(na),
+        config.solver,
+        adaptive,
+        config.max_steps,
+    )
+    if _is_default_adjoint(adjoint):
+        return _solve(*args, False, config.project)
+    return _solve_adjoint(*args, config.project, adjoint)
+
+
+# --------------------------------------------------------------------------------------
+# fit
+
+
+class FitResult(eqx.Module):
+    """What `fit` returns.
+
+    **Fields:**
+
+    - `scene`: the scene with the fitted parameter values.
+    - `losses`: loss at each step (before its update), NumPy array `(steps,)`.
+    - `grad_norm`: 2-norm of the gradient at the last evaluated point, with respect to
+      the optimised variables (log p for positive parameters: a relative sensitivity).
+    - `params`: dict label -> NumPy array of the parameter's values along the run.
+    - `names`: the labels of the fitted parameters, in the order given.
+    - `converged`: whether a stopping test (`gtol`) was met.
+    - `message`: why the run stopped.
+    - `compile_time`, `run_time`: seconds (the first step includes compilation).
+    """
+
+    scene: Scene
+    losses: np.ndarray
+    grad_norm: float
+    params: dict
+    names: tuple
+    converged: bool
+    message: str
+    compile_time: float
+    run_time: float
+
+    def values(self) -> dict:
+        """Fitted values, label -> float."""
+        return {n: float(v[-1]) for n, v in self.params.items()}
+
+
+def _to_theta(diff, pos):
+    return jtu.tree_map(lambda x, p: jnp.log(x) if p else x, diff, pos)
+
+
+def _from_theta(theta, pos):
+    return jtu.tree_map(lambda x, p: jnp.exp(x) if p else x, theta, pos)
+
+
+def _objective(theta, pos, frozen, loss_fn, config, simulate, ts):
+    scene = eqx.combine(_from_theta(theta, pos), frozen)
+    if simulate:
+        return loss_fn(solve(scene, config, ts), scene)
+    return loss_fn(scene)
+
+
+def _forward_mode(f):
+    """`f` with a reverse-mode rule computed in forward mode: one JVP per optimised
+    scalar, sharing the primal solve. Lets reverse-mode callers (optax line
+    searches) differentiate through diffrax's `ForwardMode`."""
+
+    def value_and_grad(theta):
+        flat, unravel = jfu.ravel_pytree(theta)
+        g = lambda x: f(unravel(x))
+        value, grad = jax.vmap(lambda v: jax.jvp(g, (flat,), (v,)), out_axes=(None, 0))(
+            jnp.eye(flat.size, dtype=flat.dtype)
+        )
+        return value, unravel(grad)
+
+    @jax.custom_vjp
+    def h(theta):
+        return f(theta)
+
+    def bwd(grad, ct):
+        return (jtu.tree_map(lambda x: ct * x, grad),)
+
+    h.defvjp(value_and_grad, bwd)
+    return h
+
+
+def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
+    f = lambda th: _objective(th, pos, frozen, loss_fn, config, simulate, ts)
+    if isinstance(make_adjoint(config.adjoint), dfx.ForwardMode):
+        f = _forward_mode(f)
+    value, grad = jax.value_and_grad(f)(theta)
+    return value, grad, f
+
+
+@eqx.filter_jit
+def _make_step(theta, opt_state, pos, frozen, loss_fn, optimizer, config, simulate, ts):
+    value, grad, f = _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
+    updates, new_state = optimizer.update(
+        grad, opt_state, theta, value=value, grad=grad, value_fn=f
+    )
+    new_theta = optax.apply_updates(theta, updates)
+    gnorm = optax.global_norm(grad)
+    good = jnp.isfinite(value) & jnp.isfinite(gnorm)
+    # A failed solve (NaN loss) leaves the parameters where they were.
+    keep = lambda new, old: jtu.tree_map(lambda a, b: jnp.where(good, a, b), new, old)
+    new_theta = keep(new_theta, theta)
+    new_state = keep(new_state, opt_state)
+    return new_theta, new_state, value, gnorm
+
+
+def _count_steps(scene, config, ts) -> int:
+    traj = solve(scene, dataclasses.replace(config, adjoint=None), ts)
+    return int(traj.stats["num_steps"])
+
+
+def _setup(
+    scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solver_kw
+):
+    """Check the arguments of `fit`/`value_and_grad`; split the scene."""
+    if not isinstance(scene, Scene):
+        raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
+    if not callable(loss_fn):
+        raise ValueError("`loss_fn` must be callable: loss_fn(traj, scene) -> scalar.")
+    if isinstance(params, str) or callable(params):
+        params = [params]
+    if len(params) == 0:
+        raise ValueError("`params` must name at least one parameter to fit.")
+    getters = [resolve(scene, p) for p in params]
+    if len({g.path for g in getters}) != len(getters):
+        raise ValueError("`params` names the same leaf twice.")
+    if isinstance(positive, bool):
+        positive = [positive] * len(getters)
+    positive = [bool(p) for p in positive]
+    if len(positive) != len(getters):
+        raise ValueError(
+            f"`positive` must be one bool or {len(getters)} bools (one per parameter)."
+        )
+    for g, p in zip(getters, positive):
+        x = np.asarray(g(scene))
+        if p and (not np.all(np.isfinite(x)) or np.any(x <= 0)):
+            raise ValueError(
+                f"parameter {g.label!r} = {x} is fitted as positive (log p) and must "
+                "be > 0; give a positive initial value or positive=False for it."
+            )
+    adj = make_adjoint(adjoint)
+    config = SolveConfig(adjoint=adj, **solver_kw)
+    if ts is not None:
+        ts = jnp.asarray(ts, dtype=jnp.float64)
+    if (
+        simulate
+        and type(adj) is dfx.RecursiveCheckpointAdjoint
+        and adj.checkpoints is None
+        and checkpoints is not None
+    ):
+        if checkpoints == "auto":
+            n = _count_steps(scene, config, ts)
+            checkpoints = max(16, int(1.1 * n) + 8)
+        check_int("checkpoints", checkpoints, 1)
+        adj = dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
+        config = SolveConfig(adjoint=adj, **solver_kw)
+    spec = filter_spec(scene, getters)
+    diff, frozen = eqx.partition(scene, spec)
+    pos_tree = eqx.tree_at(lambda s: [g(s) for g in getters], spec, replace=positive)
+    # `pos` has the structure of `diff`: bools at the chosen leaves, None elsewhere.
+    pos, _ = eqx.partition(pos_tree, spec)
+    return getters, _to_theta(diff, pos), pos, frozen, config, ts
+
+
+@eqx.filter_jit
+def _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
+    value, grad, _ = _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
+    return value, grad
+
+
+def value_and_grad(
+    scene: Scene,
+    loss_fn: Callable,
+    params: Sequence,
+    *,
+    positive: bool | Sequence[bool] = False,
+    simulate: bool = True,
+    solver="kvaerno5",
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    ts=None,
+    n_save: int = 201,
+    dt0=None,
+    max_steps: int = 200_000,
+    project: bool = True,
+    adjoint="recursive",
+    checkpoints: int | str | None = None,
+) -> tuple[float, dict]:
+    """Loss and its gradient with respect to chosen parameters, as `fit` computes them.
+
+    Arguments as for `fit`. With `positive=False` (default) the gradient is
+    d loss / d p in the parameters' own units; with `positive=True` it is
+    d loss / d log p (what `fit` descends).
+
+    **Returns:** `(loss, {label: gradient})`.
+    """
+    getters, theta, pos, frozen, config, ts = _setup(
+        scene,
+        loss_fn,
+        params,
+        positive,
+        simulate,
+        ts,
+        adjoint,
+        checkpoints,
+        dict(
+            solver=solver,
+            rtol=rtol,
+            atol=atol,
+            n_save=n_save,
+            dt0=dt0,
+            max_steps=max_steps,
+            project=project,
+        ),
+    )
+    value, grad = _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
+    return float(value), {g.label: np.asarray(g(grad)) for g in getters}
+
+
+def fit(
+    scene: Scene,
+    loss_fn: Callable,
+    params: Sequence,
+    *,
+    steps: int = 100,
+    optimizer: optax.GradientTransformation | None = None,
+    learning_rate: float = 0.05,
+    positive: bool | Sequence[bool] = True,
+    simulate: bool = True,
+    solver="kvaerno5",
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    ts=None,
+    n_save: int = 201,
+    dt0=None,
+    max_steps: int = 200_000,
+    project: bool = True,
+    adjoint="recursive",
+    checkpoints: int | str | None = "auto",
+    gtol: float | None = None,
+    print_every: int | None = 10,
+    callback: Callable | None = None,
+) -> FitResult:
+    """Minimise `loss_fn` over chosen parameter leaves of `scene` with optax.
+
+    **Arguments:**
+
+    - `scene`: the starting scene; its values of `params` are the initial guess.
+    - `loss_fn`: `loss_fn(traj, scene) -> scalar`, with `traj` the scene's
+      `Trajectory` (saved at `ts`); with `simulate=False`, `loss_fn(scene) -> scalar`
+      and the function simulates itself (several scenes, windows, ...: use
+      `jaxstring._fit.solve` or `jaxstring.simulate` inside). Data it closes over is
+      compiled in as constants; an `eqx.Module` loss with array fields is traced.
+    - `params`: the leaves to fit, each a name (`"alpha"`, `"EA"`,
+      `"KelvinVoigt.alpha"`, `"model.EA"`) or a callable (`lambda s: s.model.EA`).
+    - `steps`: number of optimiser steps.
+    - `optimizer`: any optax transformation (default `optax.adam(learning_rate)`);
+      transformations that take extra arguments (`optax.lbfgs`) get `value`, `grad`
+      and `value_fn`.
+    - `positive`: optimise log p (one bool for all parameters or one per parameter).
+    - `solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `max_steps`, `project`: as for
+      `jaxstring.simulate`.
+    - `adjoint`: `"recursive"` (diffrax `RecursiveCheckpointAdjoint`, default),
+      `"direct"` (`DirectAdjoint`: small `max_steps` only), `"backsolve"`
+      (`BacksolveAdjoint`: continuous adjoint, gradients accurate to the solver
+      tolerance only; not for projecting models), `"forward"` (`ForwardMode`: one JVP
+      per parameter, no checkpoints; best for one or two parameters) or a diffrax
+      adjoint instance.
+    - `checkpoints`: for `"recursive"`: `"auto"` counts the steps of one forward run
+      and stores that many checkpoints (about one recomputation per step in the
+      backward pass); `None` is diffrax's default (log-depth recursion); or an int.
+    - `gtol`: stop when the gradient norm (in the optimised variables) falls below.
+    - `print_every`: print step, loss, gradient norm and values every this many
+      steps (None: silent).
+    - `callback`: called as `callback(step, loss, scene)` after every step.
+
+    **Returns:** a `FitResult` (fitted scene, loss history, final gradient norm,
+    parameter history).
+    """
+    getters, theta, pos, frozen, config, ts = _setup(
+        scene,
+        loss_fn,
+        params,
+        positive,
+        simulate,
+        ts,
+        adjoint,
+        checkpoints,
+        dict(
+            solver=solver,
+            rtol=rtol,
+            atol=atol,
+            n_save=n_save,
+            dt0=dt0,
+            max_steps=max_steps,
+            project=project,
+        ),
+    )
+    check_int("steps", steps, 1)
+    adj = config.adjoint
+    if optimizer is None:
+        check_positive("learning_rate", learning_rate)
+        optimizer = optax.adam(learning_rate)
+    optimizer = optax.with_extra_args_support(optimizer)
+    opt_state = optimizer.init(eqx.filter(theta, eqx.is_inexact_array))
+
+    labels = tuple(g.label for g in getters)
+    history = {n: [] for n in labels}
+    losses = []
+    gnorm = math.nan
+    converged = False
+    message = f"reached steps = {steps}"
+    compile_time = run_time = 0.0
+    current = scene
+
+    def record(sc):
+        for n, g in zip(labels, getters):
+            history[n].append(np.asarray(g(sc)).copy())
+
+    record(scene)
+    if print_every:
+        print(f"fit {', '.join(labels)} ({type(adj).__name__}, {steps} steps)")
+    for i in range(steps):
+        t = time.perf_counter()
+        new_theta, opt_state, value, g = _make_step(
+            theta, opt_state, pos, frozen, loss_fn, optimizer, config, simulate, ts
+        )
+        value, gnorm = float(value), float(g)
+        elapsed = time.perf_counter() - t
+        if i == 0:
+            compile_time = elapsed
+        else:
+            run_time += elapsed
+        losses.append(value)
+        if not (math.isfinite(value) and math.isfinite(gnorm)):
+            message = (
+                f"step {i}: loss or gradient not finite (a failed solve?); stopped at "
+                "the last good parameters"
+            )
+            if print_every:
+                print(message)
+            break
+        theta = new_theta
+        current = eqx.combine(_from_theta(theta, pos), frozen)
+        record(current)
+        if print_every and (i % print_every == 0 or i == steps - 1):
+            vals = "  ".join(
+                f"{n}={float(np.ravel(history[n][-2])[0]):.6g}" for n in labels
+            )
+            print(f"  step {i:4d}  loss {value:.6e}  |grad| {gnorm:.3e}  {vals}")
+        if callback is not None:
+            callback(i, value, current)
+        if gtol is not None and gnorm < gtol:
+            converged = True
+            message = f"|grad| = {gnorm:.3e} < gtol = {gtol:g} at step {i}"
+            break
+    if print_every:
+        print(
+            f"  done: {message}; "
+            + "  ".join(f"{n}={float(np.ravel(history[n][-1])[0]):.6g}" for n in labels)
+        )
+    return FitResult(
+        scene=current,
+        losses=np.asarray(losses),
+        grad_norm=gnorm,
+        params={n: np.asarray(v) for n, v in history.items()},
+        names=labels,
+        converged=converged,
+        message=message,
+        compile_time=compile_time,
+        run_time=run_time,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Uncertainty of a least-squares fit
+
+
+def gauss_newton(
+    scene: Scene,
+    residual_fn: Callable,
+    params: Sequence,
+    *,
+    sigma: float | None = None,
+    solver="kvaerno5",
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    ts=None,
+    n_save: int = 201,
+    max_steps: int = 200_000,
+    project: bool = True,
+) -> dict:
+    """Gauss-Newton covariance of a least-squares fit at `scene`.
+
+    With residuals r(p) = `residual_fn(traj, scene)` (any shape, in units of the
+    measurement) and measurement noise `sigma` (default: estimated from the residual,
+    s^2 = |r|^2 / (n - p)), the Hessian of the negative log-likelihood is
+    H = J^T J / sigma^2 and cov(p) = H^{-1}. J is computed in forward mode (one JVP per
+    parameter, diffrax `ForwardMode`).
+
+    **Returns:** dict with `names`, `values` (p), `std` (standard deviations, in the
+    parameters' units), `cov` (p x p), `J` (residuals x p), `sigma`.
+    """
+    if isinstance(params, str) or callable(params):
+        params = [params]
+    getters = [resolve(scene, p) for p in params]
+    config = SolveConfig(
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        n_save=n_save,
+        max_steps=max_steps,
+        project=project,
+        adjoint=dfx.ForwardMode(),
+    )
+    p0 = jnp.stack([jnp.asarray(g(scene), dtype=jnp.float64) for g in getters])
+    if ts is not None:
+        ts = jnp.asarray(ts, dtype=jnp.float64)
+    J, r = _gn_jacobian(p0, scene, tuple(getters), residual_fn, config, ts)
+    J, r = np.asarray(J), np.asarray(r)
+    n, m = r.size, p0.size
+    if sigma is None:
+        sigma = math.sqrt(float(r @ r) / max(n - m, 1))
+    H = J.T @ J / sigma**2
+    cov = np.linalg.inv(H)
+    return {
+        "names": tuple(g.label for g in getters),
+        "values": np.asarray(p0),
+        "std": np.sqrt(np.diag(cov)),
+        "cov": cov,
+        "J": J,
+        "sigma": sigma,
+    }
+
+
+@eqx.filter_jit
+def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
+    def res(p):
+        sc = eqx.tree_at(
+            lambda s: [g(s) for g in getters],
+            scene,
+            [p[i] for i in range(len(getters))],
+        )
+        return jnp.ravel(residual_fn(solve(sc, config, ts), sc))
+
+    return jax.jacfwd(res)(p0), res(p0)
