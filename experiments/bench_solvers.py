@@ -1,0 +1,335 @@
+"""Fast stiff integration (issue 4): jaxstring's implicit solvers against CVODE.
+
+Question: on the string pendulum in displacement variables (k = 40, alpha = 0.01,
+2 s, rtol = atol = 1e-6), how fast are jaxstring's solvers after compilation, at
+what end-mass error, and how does the best one scale with the number of elements?
+
+* Table 1, per solver x EA in {1e4, 1e6, 1e9}: wall time after compile (median of
+  repeats), compile time, steps (rejected), end-mass error (max over 201 save times)
+  against a tight reference (Rodas5P, rtol = atol = 1e-10), and the ratio to CVODE
+  (scikit-sundae, BDF, band solver, the JAX-compiled RHS and its banded JAX
+  Jacobian through callbacks) measured in the same run, if installed.
+* Table 2: wall time vs k at EA = 1e6 (k = 40 ... 1280) for Rodas5P (and CVODE up
+  to k = 320), with the fitted exponent.
+* Table 3, where the time goes: the cost of one vector field, one banded Jacobian
+  (3 b coloured JVPs), one block-cyclic-reduction factorisation and one solve,
+  measured inside a compiled loop, against the dense jacfwd + LU path.
+
+Writes experiments/results/bench_solvers{,_quick}.{md,csv,png}.
+Run: ``python experiments/bench_solvers.py [--quick]`` (quick: k = 10, 0.5 s, EA in
+{1e4, 1e6}, k = 10 ... 40; a smoke test, about a minute).
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import importlib.util
+import math
+import sys
+import time
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+import numpy as np
+from _common import (
+    end_mass_error,
+    fmt,
+    new_figure,
+    savefig,
+    timed,
+    timed_split,
+    write_table,
+)
+
+import jaxstring as js
+from jaxstring import _linalg
+from jaxstring._root_finder import StageNewton
+
+
+ADAPTIVE = ("rodas5p", "kvaerno3", "kvaerno5", "kvaerno5-newton", "implicit_euler")
+FIXED = ("theta", "newmark", "implicit_euler_fixed")
+
+
+def _solver(name, rtol, atol):
+    """A name simulate knows, or a variant built here."""
+    if name == "kvaerno5-newton":
+        rf = StageNewton(rtol=rtol, atol=atol, max_iters=10, newton=True)
+        return dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
+    return name
+
+
+def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
+    solver = _solver(name, rtol, atol)
+    kw = dict(rtol=rtol, atol=atol, ts=ts, max_steps=max_steps)
+    if name in FIXED:
+        kw["dt0"] = 0.005
+    row = {"solver": name}
+    try:
+        tm, traj = timed(lambda: js.simulate(scene, solver, **kw), repeats)
+    except Exception as e:  # a solver that cannot run is a result, not a crash
+        row.update(ok=False, status=f"{type(e).__name__}: {e}"[:100], end=None)
+        return row
+    row.update(
+        ok=traj.ok,
+        status=traj.status,
+        compile_s=tm.compile_s,
+        run_s=tm.run_s,
+        repeats=tm.n,
+        steps=int(traj.stats["num_accepted_steps"]),
+        rejected=int(traj.stats["num_rejected_steps"]),
+        end=np.asarray(traj.end_mass),
+    )
+    return row
+
+
+def run_cvode(scene, ts, rtol, atol, repeats):
+    from references import JaxRHS, solve
+
+    rhs = JaxRHS(scene)
+    out = {}
+
+    def go():
+        out["r"] = solve(rhs, "cvode-BDF", ts, rtol, atol, jac="jax-band")
+        return out["r"]
+
+    tm, _ = timed_split(rhs.compile, go, repeats)
+    r = out["r"]
+    row = {
+        "solver": "CVODE BDF (band, JAX Jacobian)",
+        "ok": r["ok"],
+        "status": r["message"][:60],
+        "compile_s": tm.compile_s,
+        "run_s": tm.run_s,
+        "repeats": tm.n,
+        "steps": None,
+        "rejected": None,
+        "nfev": r["nfev"],
+        "njev": r["njev"],
+    }
+    row["end"] = np.asarray(rhs.end_mass(r["ys"])) if r["ok"] else None
+    return row
+
+
+def component_costs(k, EA=1e6, reps=200):
+    """In-loop cost (us) of the pieces of an implicit step at k elements."""
+    scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, theta0=1.0)
+    y = scene.y0 + 1e-3 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
+    fn = lambda u: scene.vector_field(0.0, u)
+    n, b = y.shape
+    dense_fn = lambda v: fn(v.reshape(n, b)).reshape(-1)
+    bt = _linalg.block_tridiagonal_jacobian(fn, y, 1).scale_shift(1.0, -1e-4)
+    F = _linalg.bcr_factor(bt)
+    Y = y.reshape(bt.diag.shape[0], -1)
+    Jd = jnp.eye(n * b) - 1e-4 * jax.jacfwd(dense_fn)(y.reshape(-1))
+    LU = jsl.lu_factor(Jd)
+
+    def loop(body, x0):
+        f = jax.jit(lambda x: jax.lax.fori_loop(0, reps, lambda i, c: body(c), x))
+        jax.block_until_ready(f(x0))
+        best = math.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(x0))
+            best = min(best, time.perf_counter() - t0)
+        return best / reps * 1e6
+
+    def new_diag(d):
+        m = _linalg.BlockTridiagonal(bt.lower, d, bt.upper, bt.n, bt.b, 1)
+        return d + 1e-12 * _linalg.bcr_factor(m).dinv_last.sum()
+
+    return {
+        "k": k,
+        "vector field": loop(lambda u: u + 1e-12 * fn(u), y),
+        "banded Jacobian (3b JVPs)": loop(
+            lambda u: (
+                u + 1e-12 * _linalg.block_tridiagonal_jacobian(fn, u, 1).diag.sum()
+            ),
+            y,
+        ),
+        "dense Jacobian (jacfwd)": loop(
+            lambda u: u + 1e-12 * jax.jacfwd(dense_fn)(u.reshape(-1)).sum(), y
+        ),
+        "BCR factor": loop(new_diag, bt.diag),
+        "dense LU factor": loop(lambda m: m + 1e-12 * jsl.lu_factor(m)[0].sum(), Jd),
+        "BCR solve": loop(lambda f: _linalg.bcr_solve(F, f), Y),
+        "dense LU solve": loop(lambda f: jsl.lu_solve(LU, f), y.reshape(-1)),
+    }
+
+
+def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
+    tag = ("_quick" if quick else "") + suffix
+    k = 10 if quick else 40
+    t1 = 0.5 if quick else 2.0
+    EAs = (1e4, 1e6) if quick else (1e4, 1e6, 1e9)
+    ks = (10, 20, 40) if quick else (40, 80, 160, 320, 640, 1280)
+    cvode_kmax = 40 if quick else 320
+    rtol = atol = 1e-6
+    have_cvode = importlib.util.find_spec("sksundae") is not None
+    names = solvers or (ADAPTIVE + FIXED)
+    print(f"CVODE (scikit-sundae): {'yes' if have_cvode else 'not installed'}")
+
+    rows = []
+    for EA in EAs:
+        scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
+        ts = jnp.linspace(0.0, t1, 201)
+        t0 = time.perf_counter()
+        ref = js.simulate(
+            scene, "rodas5p", rtol=1e-10, atol=1e-10, ts=ts, max_steps=4_000_000
+        )
+        ref_end = np.asarray(ref.end_mass)
+        print(
+            f"EA={EA:.0e}: reference Rodas5P 1e-10 in {time.perf_counter() - t0:.1f}s"
+            f" ({int(ref.stats['num_accepted_steps'])} steps, {ref.status})"
+        )
+        block_rows = []
+        if have_cvode:
+            block_rows.append(run_cvode(scene, ts, rtol, atol, repeats))
+        for name in names:
+            block_rows.append(run_solver(scene, name, ts, rtol, atol, repeats))
+        cv = block_rows[0]["run_s"] if have_cvode and block_rows[0]["ok"] else None
+        for r in block_rows:
+            r["EA"] = EA
+            r["error_m"] = (
+                end_mass_error(r["end"], ref_end)
+                if r.get("end") is not None
+                else float("nan")
+            )
+            r["vs_cvode"] = (r["run_s"] / cv) if (cv and r.get("ok")) else None
+            if r.get("steps") is not None and r.get("ok"):
+                r["us_per_attempt"] = (
+                    1e6 * r["run_s"] / max(r["steps"] + r["rejected"], 1)
+                )
+            print(
+                f"  {r['solver']:32s} ok={r.get('ok')} run={fmt(r.get('run_s'))}s "
+                f"compile={fmt(r.get('compile_s'))}s steps={r.get('steps')} "
+                f"rej={r.get('rejected')} err={fmt(r['error_m'])} "
+                f"x CVODE={fmt(r['vs_cvode'])}",
+                flush=True,
+            )
+        rows.extend(block_rows)
+    cols = [
+        "EA",
+        "solver",
+        "ok",
+        "run_s",
+        "compile_s",
+        "repeats",
+        "steps",
+        "rejected",
+        "us_per_attempt",
+        "error_m",
+        "vs_cvode",
+        "status",
+    ]
+    notes = [
+        f"String pendulum, displacement variables, k = {k}, alpha = 0.01, "
+        f"{t1} s, rtol = atol = 1e-6; fixed-step solvers at dt = 0.005 s.",
+        "error_m: max over 201 save times of the end-mass distance to Rodas5P at "
+        "rtol = atol = 1e-10. run_s: median after compile; vs_cvode: ratio measured "
+        "in the same run.",
+        "kvaerno5-newton: Kvaerno5 with StageNewton(newton=True) (fresh banded "
+        "Jacobian at every iteration).",
+    ]
+    if not have_cvode:
+        notes.append("CVODE not measured: scikit-sundae is not installed here.")
+    write_table(
+        f"bench_solvers{tag}", rows, cols, "Solvers on the stiff string pendulum", notes
+    )
+
+    if not scaling:
+        return rows, None, None
+    # Scaling in k at EA = 1e6 (Rodas5P, CVODE).
+    scal = []
+    for kk in ks:
+        scene = js.scenes.string_pendulum("displacement", k=kk, EA=1e6, t1=t1)
+        ts = jnp.linspace(0.0, t1, 21)
+        r = run_solver(scene, "rodas5p", ts, rtol, atol, 1 if kk > 160 else repeats)
+        r.update(k=kk)
+        scal.append(r)
+        print(
+            f"  k={kk:5d} rodas5p run={fmt(r.get('run_s'))}s steps={r.get('steps')}"
+            f" rej={r.get('rejected')}",
+            flush=True,
+        )
+        if have_cvode and kk <= cvode_kmax:
+            c = run_cvode(scene, ts, rtol, atol, 1 if kk > 160 else repeats)
+            c.update(k=kk)
+            scal.append(c)
+            print(f"  k={kk:5d} CVODE   run={fmt(c.get('run_s'))}s", flush=True)
+    fits = {}
+    for label in {r["solver"] for r in scal}:
+        pts = [(r["k"], r["run_s"]) for r in scal if r["solver"] == label and r["ok"]]
+        if len(pts) >= 2:
+            kk, tt = np.array(pts).T
+            fits[label] = float(np.polyfit(np.log(kk), np.log(tt), 1)[0])
+    for r in scal:
+        r["exponent"] = fits.get(r["solver"])
+    write_table(
+        f"bench_solvers_scaling{tag}",
+        scal,
+        ["k", "solver", "ok", "run_s", "steps", "rejected", "exponent"],
+        "Wall time vs number of elements k, EA = 1e6",
+        [
+            f"Fitted exponent of run_s ~ k^p over k = {ks[0]} ... {ks[-1]} "
+            f"(CVODE up to {cvode_kmax}): "
+            + ", ".join(f"{a}: {b:.2f}" for a, b in fits.items())
+        ],
+    )
+
+    # Where the time goes.
+    comp = [component_costs(kk) for kk in ((10, 40) if quick else (40, 160))]
+    write_table(
+        f"bench_solvers_components{tag}",
+        comp,
+        list(comp[0]),
+        "In-loop cost of the pieces of an implicit step (us), EA = 1e6",
+        ["Measured inside a compiled fori_loop (no dispatch overhead)."],
+    )
+
+    fig, ax = new_figure(2, 1, w=5.5)
+    for name in {r["solver"] for r in rows}:
+        pts = [
+            (r["EA"], r["run_s"]) for r in rows if r["solver"] == name and r.get("ok")
+        ]
+        if pts:
+            e, t = np.array(pts).T
+            ax[0, 0].loglog(e, t, "o-", label=name)
+    ax[0, 0].set_xlabel("EA (N)")
+    ax[0, 0].set_ylabel("wall time after compile (s)")
+    ax[0, 0].set_title(f"k = {k}, {t1} s, rtol = atol = 1e-6")
+    ax[0, 0].legend(fontsize=6)
+    for label, p in fits.items():
+        pts = [(r["k"], r["run_s"]) for r in scal if r["solver"] == label and r["ok"]]
+        kk, tt = np.array(pts).T
+        ax[0, 1].loglog(kk, tt, "o-", label=f"{label} (k^{p:.2f})")
+    ax[0, 1].set_xlabel("number of elements k")
+    ax[0, 1].set_ylabel("wall time after compile (s)")
+    ax[0, 1].set_title("EA = 1e6")
+    ax[0, 1].legend(fontsize=7)
+    savefig(fig, f"bench_solvers{tag}")
+    return rows, scal, comp
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    p.add_argument("--solvers", default=None, help="comma-separated solver names")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--suffix", default="", help="appended to the output names")
+    p.add_argument("--no-scaling", action="store_true", help="table 1 only")
+    a = p.parse_args()
+    main(
+        quick=a.quick or bool(os.environ.get("SMOKE_TEST")),
+        solvers=tuple(a.solvers.split(",")) if a.solvers else None,
+        repeats=a.repeats,
+        suffix=a.suffix,
+        scaling=not a.no_scaling,
+    )

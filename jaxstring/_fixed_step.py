@@ -1,0 +1,248 @@
+"""The source paper's fixed-step "semi-professional" integrators as diffrax solvers.
+
+* ``ThetaMethod(theta)``: y1 = y0 + h (theta f(t1, y1) + (1 - theta) f(t0, y0)).
+  theta = 1/2 is the trapezoidal rule (order 2, A-stable, no damping of stiff
+  modes), theta = 1 implicit Euler (order 1, L-stable); order 1 for any
+  theta != 1/2.
+* ``Newmark(gamma, beta)`` on the second-order form y = (q, v), q' = v, v' = a:
+  q1 = q0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1),  v1 = v0 + h ((1 - gamma) a0
+  + gamma a1), a1 = a(t1, q1, v1). The unknown is the acceleration a1 only (half the
+  size of the state). gamma = 1/2, beta = 1/4 (average acceleration) is order 2 and
+  A-stable; it equals the trapezoidal rule applied to (q, v).
+
+Both take a fixed step (use `diffrax.ConstantStepSize`; `simulate` does, with
+`dt0`, default 0.005 s) and solve each step by full Newton (a fresh Jacobian at every
+iteration): a fixed-step method cannot reject a step, so its nonlinear solve must not
+give up early. The Jacobian is banded for strings and chains (a few coloured JVPs
+and block cyclic reduction, ``jaxstring._linalg``), so full Newton stays O(k).
+The Newton iteration stops when the scaled update (atol + rtol |y|, RMS) is below
+`kappa`; a step whose iteration has not converged after `max_iters` ends the
+solve with a failed status (never a silently wrong result).
+
+Newmark needs the node-major layout of the string models: the first half of the
+columns of y are the positions q, the second half their rates v = q'.
+"""
+
+from typing import Any, ClassVar
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.lax as lax
+import jax.numpy as jnp
+
+from . import _linalg
+
+
+def _rms(x):
+    return jnp.sqrt(jnp.mean(x**2))
+
+
+class _ThetaResidual(eqx.Module):
+    theta: float = eqx.field(static=True)
+
+    def __call__(self, dy, a):
+        t1, y0, h, f0, terms, args = a
+        f1 = terms.vf(t1, y0 + dy, args)
+        return dy - h * (self.theta * f1 + (1 - self.theta) * f0)
+
+
+class _NewmarkResidual(eqx.Module):
+    gamma: float = eqx.field(static=True)
+    beta: float = eqx.field(static=True)
+
+    def state(self, a1, a):
+        t1, q0, v0, a0, h, terms, args = a
+        q1 = q0 + h * v0 + h**2 * ((0.5 - self.beta) * a0 + self.beta * a1)
+        v1 = v0 + h * ((1 - self.gamma) * a0 + self.gamma * a1)
+        return jnp.concatenate([q1, v1], axis=-1)
+
+    def __call__(self, a1, a):
+        t1, q0, *_ = a
+        terms, args = a[5], a[6]
+        m = q0.shape[-1]
+        f1 = terms.vf(t1, self.state(a1, a), args)
+        return a1 - f1[..., m:]
+
+
+def _newton(residual, x0, a, y_of_x, rtol, atol, kappa, max_iters, linear_solver):
+    """Damped full Newton for residual(x, a) = 0 from x0. Returns (x, converged).
+
+    Increments are measured in the units of the state y_of_x(x) (atol + rtol |y|,
+    RMS). Damping: Deuflhard's natural monotonicity test -- a step of length lam
+    is accepted when the simplified Newton correction at the new point (same
+    factorisation, so scale-invariant) is smaller than (1 - lam / 2) times the
+    Newton correction; otherwise lam is halved (down to 1/64). Far from the
+    solution (a large fixed step on a stiff, strongly nonlinear string) plain
+    Newton can cycle; the damped iteration converges.
+    """
+    width = _linalg.choose_structure(residual, x0, a, linear_solver)
+    fn = lambda u: residual(u, a)
+
+    def scaled(x_from, x_to):
+        dy = y_of_x(x_from) - y_of_x(x_to)
+        size = _rms(dy / (atol + rtol * jnp.abs(y_of_x(x_to))))
+        return jnp.where(jnp.isfinite(size), size, jnp.inf)
+
+    def body(carry):
+        x, i, _ = carry
+        r, lin = jax.linearize(fn, x)
+        fac = _linalg.factor(_linalg.jacobian(fn, x, width, lin))
+        dx = fac.solve(r)
+        size = scaled(x, x - dx)
+
+        def trial(lam):
+            x_new = x - lam * dx
+            bar = fac.solve(fn(x_new))
+            return x_new, scaled(x_new, x_new - bar)
+
+        def damp_cond(c):
+            lam, _, bar_size = c
+            return (bar_size > (1 - lam / 2) * size) & (lam > 1 / 64) & (size > kappa)
+
+        def damp_body(c):
+            lam, _, _ = c
+            lam = lam / 2
+            x_new, bar_size = trial(lam)
+            return lam, x_new, bar_size
+
+        x_full, bar_full = trial(jnp.ones((), size.dtype))
+        _, x_new, _ = lax.while_loop(
+            damp_cond, damp_body, (jnp.ones((), size.dtype), x_full, bar_full)
+        )
+        return x_new, i + 1, size
+
+    def cond(carry):
+        _, i, size = carry
+        return (i < max_iters) & (size > kappa) & jnp.isfinite(size)
+
+    dtype = jnp.result_type(x0)
+    x, _, size = lax.while_loop(cond, body, (x0, 0, jnp.array(1e300, dtype)))
+    return x, size <= kappa
+
+
+class ThetaMethod(dfx.AbstractSolver):
+    """Theta-method with a fixed step and full Newton.
+
+    **Arguments:**
+
+    - `theta`: in [0, 1]; 1/2 trapezoidal (order 2), 1 implicit Euler.
+    - `rtol`, `atol`: tolerances of the Newton iteration (state units).
+    - `kappa`: stop when the scaled update is below `kappa`.
+    - `max_iters`: Newton iteration limit per step.
+    - `linear_solver`: `"auto"`, `"dense"` or `"banded"`.
+    """
+
+    theta: float = eqx.field(static=True, default=0.5)
+    rtol: Any = 1e-7
+    atol: Any = 1e-7
+    kappa: float = eqx.field(static=True, default=0.1)
+    max_iters: int = eqx.field(static=True, default=100)
+    linear_solver: str = eqx.field(static=True, default="auto")
+    term_structure: ClassVar = dfx.AbstractTerm
+    interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
+
+    def __check_init__(self):
+        if not 0.0 <= float(self.theta) <= 1.0:
+            raise ValueError(f"`theta` must lie in [0, 1]; got {self.theta!r}.")
+
+    def order(self, terms):
+        return 2 if self.theta == 0.5 else 1
+
+    def init(self, terms, t0, t1, y0, args):
+        return None
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        del solver_state, made_jump
+        h = t1 - t0
+        f0 = terms.vf(t0, y0, args)
+        a = (t1, y0, h, f0, terms, args)
+        res = _ThetaResidual(self.theta)
+        dy, ok = _newton(
+            res,
+            jnp.zeros_like(y0),
+            a,
+            lambda d: y0 + d,
+            self.rtol,
+            self.atol,
+            self.kappa,
+            self.max_iters,
+            self.linear_solver,
+        )
+        y1 = y0 + dy
+        result = dfx.RESULTS.where(
+            ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
+        )
+        return y1, None, dict(y0=y0, y1=y1), None, result
+
+
+class Newmark(dfx.AbstractSolver):
+    """Newmark-beta with a fixed step and full Newton on the acceleration.
+
+    **Arguments:**
+
+    - `gamma`, `beta`: Newmark parameters (default 1/2, 1/4: average acceleration,
+      order 2). Order 1 when gamma != 1/2.
+    - `rtol`, `atol`, `kappa`, `max_iters`, `linear_solver`: as for `ThetaMethod`.
+
+    The state's last axis is (q, v) halves with q' = v (all jaxstring strings).
+    """
+
+    gamma: float = eqx.field(static=True, default=0.5)
+    beta: float = eqx.field(static=True, default=0.25)
+    rtol: Any = 1e-7
+    atol: Any = 1e-7
+    kappa: float = eqx.field(static=True, default=0.1)
+    max_iters: int = eqx.field(static=True, default=100)
+    linear_solver: str = eqx.field(static=True, default="auto")
+    term_structure: ClassVar = dfx.AbstractTerm
+    interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
+
+    def __check_init__(self):
+        if not (0.0 <= float(self.beta) <= 0.5 and 0.0 <= float(self.gamma) <= 1.0):
+            raise ValueError(
+                "Newmark needs 0 <= `beta` <= 1/2 and 0 <= `gamma` <= 1; got "
+                f"beta={self.beta!r}, gamma={self.gamma!r}."
+            )
+
+    def order(self, terms):
+        return 2 if self.gamma == 0.5 else 1
+
+    def init(self, terms, t0, t1, y0, args):
+        if jnp.ndim(y0) < 1 or jnp.shape(y0)[-1] % 2:
+            raise ValueError(
+                "Newmark needs a state whose last axis holds positions and their "
+                f"rates in two equal halves; got shape {jnp.shape(y0)}."
+            )
+        return None
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        del solver_state, made_jump
+        h = t1 - t0
+        m = y0.shape[-1] // 2
+        q0, v0 = y0[..., :m], y0[..., m:]
+        a0 = terms.vf(t0, y0, args)[..., m:]
+        a = (t1, q0, v0, a0, h, terms, args)
+        res = _NewmarkResidual(self.gamma, self.beta)
+        a1, ok = _newton(
+            res,
+            a0,
+            a,
+            lambda acc: res.state(acc, a),
+            self.rtol,
+            self.atol,
+            self.kappa,
+            self.max_iters,
+            self.linear_solver,
+        )
+        y1 = res.state(a1, a)
+        result = dfx.RESULTS.where(
+            ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
+        )
+        return y1, None, dict(y0=y0, y1=y1), None, result

@@ -1,0 +1,469 @@
+"""Newton-matrix linear algebra that exploits the chain structure of strings.
+
+The state of every string and chain model is node-major (one row per node), so the
+Jacobian of its vector field is block-banded: the row block of node i depends only on
+the nodes i - w .. i + w (w = 1 for all string formulations: displacement, natural
+eps-t and eps-phi, where x = -M^{-1} z applies a tridiagonal M^{-1} to z(node)). A
+dense Jacobian (``jax.jacfwd``, n JVPs) and a dense LU (O(n^3)) then waste almost
+all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
+
+* ``detect_width(fn, y)``: the node bandwidth w, found numerically *at trace time*
+  on a surrogate (random inputs of the same shapes): a few unit-column JVPs give a
+  candidate w, and two random-direction JVPs verify that the banded reconstruction
+  reproduces J v. Anything unexpected (a pytree state, a closure that cannot be
+  evaluated eagerly, a wide band) gives ``None``: use the dense path.
+* ``block_tridiagonal_jacobian(fn, y, w)``: the Jacobian as a block-tridiagonal
+  matrix of super-blocks (w nodes each, block size B = w b) from only 3 B JVPs
+  (Curtis-Powell-Reid colouring: columns whose super-blocks are 3 apart never meet
+  in a row), never materialising the n x n matrix.
+* ``bcr_factor`` / ``bcr_solve``: block cyclic reduction, O(N B^3) work and
+  O(log N) sequential depth, fully vectorised over blocks (no ``lax.scan``; the
+  levels are unrolled at trace time). It pivots within the B x B blocks (``inv``)
+  but not across blocks: fine for the Newton matrices ``I - h gamma J`` of
+  mechanical chains, whose reduced matrices are (scaled) symmetric positive
+  definite; ``tests/test_fast_solvers.py`` checks it against the dense solve.
+* ``NewtonFactor``: one interface (``build(fn, y, structure)`` and ``.solve``)
+  over the dense and the banded paths, used by the stage Newton iteration, the
+  Rosenbrock, BDF, theta and Newmark solvers.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.flatten_util as jfu
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+import jax.tree_util as jtu
+import numpy as np
+from jaxtyping import Array
+
+
+# Below this many unknowns the dense path is as fast (few JVPs either way) and has
+# fewer ops to compile.
+MIN_BANDED_SIZE = 48
+# Use the band only if its colour count 3 w b is well below the number of unknowns.
+_MAX_COLOUR_FRACTION = 0.5
+
+
+# ----------------------------------------------------------------------------
+# Structure detection (trace time, on a surrogate)
+# ----------------------------------------------------------------------------
+
+
+def _is_array(x) -> bool:
+    return isinstance(x, (jax.Array, np.ndarray, np.generic))
+
+
+def _surrogate(tree, seed: int):
+    """Concrete stand-ins for the array leaves of `tree`: same shapes and dtypes,
+    values uniform in [0.5, 1.5] (integers: 0). Structure only matters here."""
+    rng = np.random.default_rng(seed)
+    leaves, treedef = jtu.tree_flatten(tree)
+    out = []
+    for x in leaves:
+        if _is_array(x) or isinstance(x, jax.core.Tracer):
+            dtype = np.dtype(x.dtype)
+            if np.issubdtype(dtype, np.inexact):
+                v = rng.uniform(0.5, 1.5, size=np.shape(x)).astype(dtype)
+            else:
+                v = np.zeros(np.shape(x), dtype)
+            out.append(jnp.asarray(v))
+        else:
+            out.append(x)
+    return jtu.tree_unflatten(treedef, out)
+
+
+_WIDTH_CACHE: dict = {}
+
+
+def _band_probe(fn, W, y, args, v):
+    """Band of the Jacobian of `fn(., args)` at `y` assuming node bandwidth <= W
+    (colour period 2W + 1), and the error of that band against the exact J v."""
+    n, b = y.shape
+    q = 2 * W + 1
+    seeds = np.zeros((q * b, n, b), dtype=np.dtype(y.dtype))
+    for j in range(n):
+        for c in range(b):
+            seeds[(j % q) * b + c, j, c] = 1.0
+    _, lin = jax.linearize(lambda u: fn(u, args), y)
+    out = jax.vmap(lin)(jnp.asarray(seeds))  # (q b, n, b): [colour, row node, row comp]
+    rows = np.arange(n)[:, None]
+    offs = np.arange(-W, W + 1)[None, :]
+    cols = rows + offs  # (n, q) column node of each band entry
+    inside = (cols >= 0) & (cols < n)
+    colour = (np.clip(cols, 0, n - 1) % q)[:, :, None] * b + np.arange(b)  # (n, q, b)
+    # band[i, d, r, c] = J[(i, r), (i + d, c)]
+    band = out[colour, rows[:, :, None], :]  # (n, q, b_col, b_row)
+    band = jnp.where(inside[:, :, None, None], jnp.swapaxes(band, 2, 3), 0.0)
+    vcols = jnp.where(inside[:, :, None], v[np.clip(cols, 0, n - 1)], 0.0)
+    approx = jnp.einsum("idrc,idc->ir", band, vcols)
+    exact = lin(v)
+    err = jnp.max(jnp.abs(exact - approx)) / (jnp.max(jnp.abs(exact)) + 1e-300)
+    used = jnp.any((band != 0) | ~jnp.isfinite(band), axis=(0, 2, 3))  # (q,)
+    return used, err, jnp.all(jnp.isfinite(exact))
+
+
+def detect_width(fn, y, args=None, max_width: int = 4):
+    """Node bandwidth of the Jacobian of `fn(y, args)` w.r.t. `y` (2-d, node-major),
+    or None if it is wider than `max_width` or cannot be determined.
+
+    Runs at trace time, eagerly, on surrogate values of the same shapes (so it works
+    when `y` and `args` are tracers), assuming the sparsity pattern does not depend
+    on the values. The result is cached per jaxpr of `fn`.
+    """
+    if not (hasattr(y, "shape") and len(y.shape) == 2):
+        return None
+    n, b = y.shape
+    if n < 3:
+        return None
+    W = min(max_width, n - 1)
+    try:
+        with jax.ensure_compile_time_eval():
+            fs = _surrogate(fn, 1)
+            # Non-array leaves (e.g. the jaxprs of closure-converted functions in
+            # diffrax's stage arguments) are structure: close over them.
+            a_dyn, a_static = eqx.partition(_surrogate(args, 2), eqx.is_array)
+            call = lambda u, a: fs(u, eqx.combine(a, a_static))
+            y0 = _surrogate(y, 3)
+            key = (str(jax.make_jaxpr(call)(y0, a_dyn)), W)
+            if key in _WIDTH_CACHE:
+                return _WIDTH_CACHE[key]
+            probe = jax.jit(lambda u, a, v: _band_probe(call, W, u, a, v))
+            used = np.zeros(2 * W + 1, bool)
+            width = None
+            for seed in (0, 1):
+                ys = _surrogate(y, 10 + seed)
+                aa = eqx.filter(_surrogate(args, 20 + seed), eqx.is_array)
+                v = np.random.default_rng(30 + seed).standard_normal((n, b))
+                u, err, finite = probe(ys, aa, jnp.asarray(v, dtype=y.dtype))
+                if isinstance(err, jax.core.Tracer):
+                    return None
+                if not bool(finite) or float(err) > 1e-8:
+                    break
+                used |= np.asarray(u)
+            else:
+                offs = np.nonzero(used)[0] - W
+                width = max(int(np.max(np.abs(offs))) if offs.size else 0, 1)
+            _WIDTH_CACHE[key] = width
+            return width
+    except Exception:  # noqa: BLE001  (a surrogate we cannot evaluate: go dense)
+        return None
+
+
+def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
+    """Return the node bandwidth to use (int) or None for the dense path.
+
+    `linear_solver`: "dense", "banded" (raises if no band is found) or "auto"
+    (banded for large enough systems with a narrow band).
+    """
+    if linear_solver == "dense":
+        return None
+    width = detect_width(fn, y, args)
+    if linear_solver == "banded":
+        if width is None:
+            raise ValueError(
+                "`linear_solver='banded'` needs a node-major state whose Jacobian "
+                "is block-banded; none was found. Use 'dense' or 'auto'."
+            )
+        return width
+    if width is None:
+        return None
+    n, b = y.shape
+    size = n * b
+    if size < MIN_BANDED_SIZE or 3 * width * b > _MAX_COLOUR_FRACTION * size:
+        return None
+    return width
+
+
+# ----------------------------------------------------------------------------
+# Block-tridiagonal matrices
+# ----------------------------------------------------------------------------
+
+
+class BlockTridiagonal(eqx.Module):
+    """Block-tridiagonal matrix: row block I is
+    `lower[I] x[I-1] + diag[I] x[I] + upper[I] x[I+1]` (`lower[0]`, `upper[-1]` = 0).
+
+    Blocks are super-blocks of `width` nodes of the original node-major layout
+    (`n` nodes, `b` components each), padded with identity rows to a multiple of
+    `width`.
+    """
+
+    lower: Array  # (N, B, B)
+    diag: Array
+    upper: Array
+    n: int = eqx.field(static=True)
+    b: int = eqx.field(static=True)
+    width: int = eqx.field(static=True)
+
+    def _pad(self, x):
+        N, B = self.diag.shape[0], self.diag.shape[1]
+        flat = x.reshape(-1)
+        return jnp.pad(flat, (0, N * B - flat.size)).reshape(N, B)
+
+    def _unpad(self, X):
+        return X.reshape(-1)[: self.n * self.b].reshape(self.n, self.b)
+
+    def matvec(self, x):
+        X = self._pad(x)
+        z = jnp.zeros_like(X[:1])
+        left = jnp.concatenate([z, X[:-1]], axis=0)
+        right = jnp.concatenate([X[1:], z], axis=0)
+        out = (
+            jnp.einsum("nij,nj->ni", self.lower, left)
+            + jnp.einsum("nij,nj->ni", self.diag, X)
+            + jnp.einsum("nij,nj->ni", self.upper, right)
+        )
+        return self._unpad(out)
+
+    def scale_shift(self, alpha, beta):
+        """alpha I + beta self (padding rows stay identity)."""
+        B = self.diag.shape[1]
+        eye = jnp.eye(B, dtype=self.diag.dtype)
+        pad_mask = self._pad_mask()
+        diag = beta * self.diag + alpha * eye
+        # keep padded unknowns decoupled with unit diagonal
+        diag = jnp.where(pad_mask, eye, diag)
+        return BlockTridiagonal(
+            beta * self.lower, diag, beta * self.upper, self.n, self.b, self.width
+        )
+
+    def _pad_mask(self):
+        N, B = self.diag.shape[0], self.diag.shape[1]
+        real = (jnp.arange(N * B) < self.n * self.b).reshape(N, B)
+        # a block entry (i, j) is "padding" if row i or column j is a padded unknown
+        return ~(real[:, :, None] & real[:, None, :])
+
+    def to_dense(self):
+        N, B = self.diag.shape[0], self.diag.shape[1]
+        M = jnp.zeros((N * B, N * B), self.diag.dtype)
+        for I in range(N):
+            s = slice(I * B, (I + 1) * B)
+            M = M.at[s, s].set(self.diag[I])
+            if I > 0:
+                M = M.at[s, (I - 1) * B : I * B].set(self.lower[I])
+            if I < N - 1:
+                M = M.at[s, (I + 1) * B : (I + 2) * B].set(self.upper[I])
+        m = self.n * self.b
+        return M[:m, :m]
+
+
+def block_tridiagonal_jacobian(fn, y, width: int, linear_fn=None) -> BlockTridiagonal:
+    """Jacobian of `fn` at `y` (node-major `(n, b)`) as a block-tridiagonal matrix of
+    `width`-node super-blocks, from 3 B JVPs (B = width * b).
+
+    `linear_fn`, if given, is the JVP `v -> J v` (e.g. from `jax.linearize`), so
+    that a caller that already linearised does not do it again.
+    """
+    n, b = y.shape
+    B = width * b
+    N = math.ceil(n / width)
+    if linear_fn is None:
+        _, linear_fn = jax.linearize(fn, y)
+    # Colour (r, c): every super-block I = r (mod 3), component c.
+    blk = np.arange(N) % 3
+    seeds = np.zeros((3, B, N, B))
+    for r in range(3):
+        for c in range(B):
+            seeds[r, c, blk == r, c] = 1.0
+    seeds = seeds.reshape(3 * B, N * B)[:, : n * b].reshape(3 * B, n, b)
+    seeds = jnp.asarray(seeds, dtype=y.dtype)
+    out = jax.vmap(linear_fn)(seeds)  # (3B, n, b)
+    out = out.reshape(3 * B, n * b)
+    out = jnp.pad(out, ((0, 0), (0, N * B - n * b))).reshape(3, B, N, B)
+    # out[r, c, I, i] = sum over blocks J = r (mod 3), |I - J| <= 1 of J[I i, J c].
+    idx = np.arange(N)
+    # (N, B_row, B_col) for each neighbour offset
+    take = lambda r: jnp.transpose(out[r, :, idx, :], (0, 2, 1))  # (N, i, c)
+    diag = take(idx % 3)
+    lower = take((idx - 1) % 3)
+    upper = take((idx + 1) % 3)
+    first = np.zeros((N, 1, 1), bool)
+    first[0] = True
+    last = np.zeros((N, 1, 1), bool)
+    last[-1] = True
+    lower = jnp.where(first, 0.0, lower)
+    upper = jnp.where(last, 0.0, upper)
+    # Padded unknowns (n not a multiple of width) have no seeds and no outputs, so
+    # their entries are already zero: give them a unit diagonal.
+    real = np.arange(N * B) < n * b
+    if not real.all():
+        pad_eye = np.eye(B)[None] * (~real.reshape(N, B))[:, :, None]
+        diag = diag + jnp.asarray(pad_eye, diag.dtype)
+    return BlockTridiagonal(lower, diag, upper, n, b, width)
+
+
+# ----------------------------------------------------------------------------
+# Block cyclic reduction
+# ----------------------------------------------------------------------------
+
+
+class _Level(eqx.Module):
+    alpha: Array  # (me, B, B): L_even D_odd_left^{-1}
+    beta: Array  # (me, B, B): U_even D_odd_right^{-1}
+    dinv: Array  # (mo, B, B)
+    lo: Array  # (mo, B, B)
+    uo: Array  # (mo, B, B)
+
+
+class BCRFactor(eqx.Module):
+    levels: tuple
+    dinv_last: Array  # (B, B)
+
+
+# Batched small products as broadcast-multiply-sum: XLA:CPU fuses these into one
+# loop, whereas a batched `dot` of 4 x 4 blocks is a separate, slower kernel.
+def _mm(a, b):
+    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], axis=-2)
+
+
+def _mv(a, x):
+    return jnp.sum(a * x[..., None, :], axis=-1)
+
+
+def _shift_right(x, length):
+    """[0, x_0, x_1, ...] cut or zero-padded to `length` blocks."""
+    z = jnp.zeros((1,) + x.shape[1:], x.dtype)
+    y = jnp.concatenate([z, x], axis=0)
+    return _fit(y, length)
+
+
+def _fit(x, length):
+    if x.shape[0] >= length:
+        return x[:length]
+    z = jnp.zeros((length - x.shape[0],) + x.shape[1:], x.dtype)
+    return jnp.concatenate([x, z], axis=0)
+
+
+def small_inv(a):
+    """Inverse of a batch of small matrices `(..., B, B)` by Gauss-Jordan elimination
+    with partial pivoting, unrolled over the B columns.
+
+    XLA:CPU lowers ``jnp.linalg.inv`` to one LAPACK call per matrix of the batch;
+    for the 4 x 4 ... 12 x 12 blocks of a string these elementwise ops (which XLA
+    fuses) are several times faster.
+    """
+    B = a.shape[-1]
+    eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype), a.shape)
+    m = jnp.concatenate([a, eye], axis=-1)  # (..., B, 2B)
+    rows = jnp.arange(B)
+    for j in range(B):
+        col = jnp.abs(m[..., :, j])
+        col = jnp.where(rows >= j, col, -1.0)
+        p = jnp.argmax(col, axis=-1)  # (...,)
+        # swap rows j and p
+        onehot_p = (rows == p[..., None]).astype(a.dtype)  # (..., B)
+        row_p = jnp.sum(onehot_p[..., :, None] * m, axis=-2)
+        row_j = m[..., j, :]
+        swap = onehot_p[..., :, None] * (row_j - row_p)[..., None, :]
+        m = m + swap
+        m = m.at[..., j, :].set(row_p)
+        piv = m[..., j, j]
+        m = m.at[..., j, :].divide(piv[..., None])
+        factor_ = jnp.where(rows == j, 0.0, m[..., :, j])  # (..., B)
+        m = m - factor_[..., :, None] * m[..., j, None, :]
+    return m[..., B:]
+
+
+def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
+    """Block cyclic reduction of a block-tridiagonal matrix (no pivoting across
+    blocks; pivoted inverses of the B x B blocks).
+
+    One level eliminates the odd-numbered blocks: with `a = L_i D_{i-1}^{-1}` and
+    `c = U_i D_{i+1}^{-1}`, even row i becomes
+    `D_i - a U_{i-1} - c L_{i+1}` on the diagonal, `-a L_{i-1}` and `-c U_{i+1}`
+    towards i - 2 and i + 2. Levels are unrolled at trace time (ceil(log2 N)).
+    """
+    L, D, U = mat.lower, mat.diag, mat.upper
+    levels = []
+    while D.shape[0] > 1:
+        m = D.shape[0]
+        me = (m + 1) // 2
+        Le, De, Ue = L[0::2], D[0::2], U[0::2]
+        Lo, Do, Uo = L[1::2], D[1::2], U[1::2]
+        dinv = small_inv(Do)
+        alpha = _mm(Le, _shift_right(dinv, me))
+        beta = _mm(Ue, _fit(dinv, me))
+        D = De - _mm(alpha, _shift_right(Uo, me)) - _mm(beta, _fit(Lo, me))
+        L = -_mm(alpha, _shift_right(Lo, me))
+        U = -_mm(beta, _fit(Uo, me))
+        levels.append(_Level(alpha, beta, dinv, Lo, Uo))
+    return BCRFactor(tuple(levels), small_inv(D[0]))
+
+
+def bcr_solve(fac: BCRFactor, f):
+    """Solve with a `bcr_factor` factorisation; `f` has shape (N, B)."""
+    stack = []
+    for lev in fac.levels:
+        fe, fo = f[0::2], f[1::2]
+        me = fe.shape[0]
+        stack.append(fo)
+        f = fe - _mv(lev.alpha, _shift_right(fo, me)) - _mv(lev.beta, _fit(fo, me))
+    x = (fac.dinv_last @ f[0])[None]
+    for lev, fo in zip(reversed(fac.levels), reversed(stack)):
+        mo = fo.shape[0]
+        me = x.shape[0]
+        xo = _mv(lev.dinv, fo - _mv(lev.lo, x[:mo]) - _mv(lev.uo, _fit(x[1:], mo)))
+        if me == mo:
+            x = jnp.stack([x, xo], axis=1).reshape(2 * mo, -1)
+        else:
+            inter = jnp.stack([x[:-1], xo], axis=1).reshape(2 * mo, -1)
+            x = jnp.concatenate([inter, x[-1:]], axis=0)
+    return x
+
+
+# ----------------------------------------------------------------------------
+# One interface over the dense and banded paths
+# ----------------------------------------------------------------------------
+
+
+class DenseJacobian(eqx.Module):
+    """A dense Jacobian of a pytree -> same-pytree map (flattened)."""
+
+    matrix: Array
+
+    def scale_shift(self, alpha, beta):
+        eye = jnp.eye(self.matrix.shape[0], dtype=self.matrix.dtype)
+        return DenseJacobian(alpha * eye + beta * self.matrix)
+
+
+class DenseFactor(eqx.Module):
+    lu: Array
+    piv: Array
+
+    def solve(self, rhs):
+        flat, unravel = jfu.ravel_pytree(rhs)
+        return unravel(jsl.lu_solve((self.lu, self.piv), flat))
+
+
+class BandedFactor(eqx.Module):
+    fac: BCRFactor
+    n: int = eqx.field(static=True)
+    b: int = eqx.field(static=True)
+    N: int = eqx.field(static=True)
+    B: int = eqx.field(static=True)
+
+    def solve(self, rhs):
+        flat = rhs.reshape(-1)
+        X = jnp.pad(flat, (0, self.N * self.B - flat.size)).reshape(self.N, self.B)
+        x = bcr_solve(self.fac, X)
+        return x.reshape(-1)[: self.n * self.b].reshape(self.n, self.b)
+
+
+def jacobian(fn, y, width, linear_fn=None):
+    """Jacobian of `fn` at `y`: `BlockTridiagonal` if `width` is an int, else dense."""
+    if width is None:
+        flat, unravel = jfu.ravel_pytree(y)
+        f_flat = lambda v: jfu.ravel_pytree(fn(unravel(v)))[0]
+        return DenseJacobian(jax.jacfwd(f_flat)(flat))
+    return block_tridiagonal_jacobian(fn, y, width, linear_fn)
+
+
+def factor(mat):
+    """Factorise a `DenseJacobian`-like or `BlockTridiagonal` matrix."""
+    if isinstance(mat, BlockTridiagonal):
+        N, B = mat.diag.shape[0], mat.diag.shape[1]
+        return BandedFactor(bcr_factor(mat), mat.n, mat.b, N, B)
+    lu, piv = jsl.lu_factor(mat.matrix)
+    return DenseFactor(lu, piv)

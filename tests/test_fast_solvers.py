@@ -1,0 +1,288 @@
+"""Fast stiff integration: banded Newton matrices, Rodas5P, theta and Newmark."""
+
+import functools
+import math
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxstring as js
+from jaxstring import _linalg
+from jaxstring._fixed_step import Newmark, ThetaMethod
+from jaxstring._root_finder import StageNewton
+from jaxstring._rosenbrock import Rodas5P
+
+from .helpers import FORMULATIONS, fitted_order
+
+
+# ---------------------------------------------------------------------------
+# Problems with known solutions
+# ---------------------------------------------------------------------------
+
+_W, _C = 3.0, 0.4  # free damped oscillator q'' = -w^2 q - c q'
+
+
+def _oscillator(t, y, args):
+    del t, args
+    q, v = y[:, :1], y[:, 1:]
+    return jnp.concatenate([v, -(_W**2) * q - _C * v], axis=1)
+
+
+def _oscillator_exact(t):
+    wd = math.sqrt(_W**2 - _C**2 / 4)
+    e = math.exp(-_C * t / 2)
+    q = e * (math.cos(wd * t) + _C / (2 * wd) * math.sin(wd * t))
+    v = -e * (_W**2 / wd) * math.sin(wd * t)
+    return np.array([[q, v]])
+
+
+def _fixed_errors(solver, vf, y0, exact, hs, t1=2.0):
+    errs = []
+    for h in hs:
+        sol = dfx.diffeqsolve(dfx.ODETerm(vf), solver, 0.0, t1, h, y0)
+        assert sol.result == dfx.RESULTS.successful
+        errs.append(float(np.max(np.abs(np.asarray(sol.ys[-1]) - exact(t1)))))
+    return errs
+
+
+@pytest.mark.parametrize(
+    "solver, order",
+    [
+        (ThetaMethod(theta=0.5), 2.0),
+        (ThetaMethod(theta=1.0), 1.0),
+        (ThetaMethod(theta=0.75), 1.0),
+        (Newmark(gamma=0.5, beta=0.25), 2.0),
+    ],
+)
+def test_fixed_step_order_on_damped_oscillator(solver, order):
+    hs = (0.02, 0.01, 0.005)
+    y0 = jnp.array([[1.0, 0.0]])
+    errs = _fixed_errors(solver, _oscillator, y0, _oscillator_exact, hs)
+    slope = fitted_order(hs, errs)
+    assert abs(slope - order) < 0.1, (slope, errs)
+
+
+def test_rodas5p_order_five_on_nonlinear_problem():
+    # Logistic equation u' = u (1 - u), u(0) = 0.1 (exact solution). (On linear
+    # problems Rodas5P's stability function is more accurate than order 5, so a
+    # linear test problem would overstate the order.)
+    hs = (0.2, 0.1, 0.05, 0.025)
+
+    def vf(t, y, args):
+        del t, args
+        return y * (1 - y)
+
+    def exact(t):
+        return np.array([[1 / (1 + 9 * math.exp(-t))]])
+
+    errs = _fixed_errors(Rodas5P(), vf, jnp.array([[0.1]]), exact, hs, t1=4.0)
+    slope = fitted_order(hs, errs)
+    assert 4.6 < slope < 5.4, (slope, errs)
+
+
+def test_rodas5p_stiff_prothero_robinson():
+    # y' = lam (y - g) + g', exact y = g = sin t, lam = -1e6: the step size must be
+    # set by the smooth solution, not by lam (an explicit method would need ~1e6
+    # steps), and the steps must stay accurate (stiff accuracy).
+    lam = -1e6
+
+    def vf(t, y, args):
+        del args
+        return lam * (y - jnp.sin(t)) + jnp.cos(t)
+
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(vf),
+        Rodas5P(),
+        0.0,
+        3.0,
+        1e-3,
+        jnp.zeros((1, 1)),
+        stepsize_controller=dfx.PIDController(rtol=1e-7, atol=1e-7),
+        saveat=dfx.SaveAt(steps=True),
+    )
+    n = int(sol.stats["num_accepted_steps"])
+    ts = np.asarray(sol.ts[:n])
+    err = np.max(np.abs(np.asarray(sol.ys[:n, 0, 0]) - np.sin(ts)))
+    assert err < 1e-6, err
+    assert n < 50, n
+
+
+def test_rodas5p_dense_output_order():
+    # Between steps the interpolant is of order 4 (local error O(h^5)) on a smooth
+    # problem: logistic equation, read half-way through a step.
+    def vf(t, y, args):
+        del t, args
+        return y * (1 - y)
+
+    hs = (0.2, 0.1, 0.05)
+    errs = []
+    for h in hs:
+        t = 1.0 + h / 2
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(vf),
+            Rodas5P(),
+            0.0,
+            2.0,
+            h,
+            jnp.array([[0.1]]),
+            saveat=dfx.SaveAt(ts=jnp.array([t])),
+        )
+        errs.append(abs(float(sol.ys[0, 0, 0]) - 1 / (1 + 9 * math.exp(-t))))
+    slope = fitted_order(hs, errs)
+    assert 4.5 < slope < 5.6, (slope, errs)
+
+
+# ---------------------------------------------------------------------------
+# Banded linear algebra on string Jacobians
+# ---------------------------------------------------------------------------
+
+
+def _string_vf(formulation, k):
+    scene = js.scenes.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
+    y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
+    return (lambda u, s: s.vector_field(0.0, u)), y, scene
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_string_jacobian_is_block_tridiagonal_and_detected(formulation):
+    fn, y, scene = _string_vf(formulation, 13)
+    assert _linalg.detect_width(fn, y, scene) == 1
+    # The dense Jacobian's nonzeros lie within one node of the diagonal...
+    n, b = y.shape
+    J = np.asarray(
+        jax.jacfwd(lambda v: fn(v.reshape(n, b), scene).reshape(-1))(y.reshape(-1))
+    )
+    rows, cols = np.nonzero(J)
+    assert np.max(np.abs(rows // b - cols // b)) == 1
+    # ... and 3 b coloured JVPs reproduce it exactly.
+    bt = _linalg.block_tridiagonal_jacobian(lambda u: fn(u, scene), y, 1)
+    assert np.max(np.abs(np.asarray(bt.to_dense()) - J)) <= 1e-14 * np.max(np.abs(J))
+
+
+def test_detect_width_rejects_global_coupling():
+    # Every row depends on every node: no band, dense path.
+    def fn(u, a):
+        return u * jnp.sum(u) * a
+
+    assert _linalg.detect_width(fn, jnp.ones((20, 4)), jnp.array(2.0)) is None
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("k, c", [(13, 1e-3), (27, 1e-4)])
+def test_banded_newton_solve_equals_dense(formulation, k, c):
+    # Newton matrices I - c J of strings are badly scaled (condition 1e9 ... 1e11:
+    # metres next to metres per second), so two backward-stable solvers may differ
+    # by up to cond * eps in the forward sense. Block cyclic reduction is backward
+    # stable (normwise backward error at round-off), and with one step of
+    # iterative refinement it equals the (refined) dense LU solve to 1e-12.
+    fn, y, scene = _string_vf(formulation, k)
+    n, b = y.shape
+    J = np.asarray(
+        jax.jacfwd(lambda v: fn(v.reshape(n, b), scene).reshape(-1))(y.reshape(-1))
+    )
+    M = np.eye(n * b) - c * J
+    rhs = np.random.default_rng(0).standard_normal((n, b))
+    dense = np.linalg.solve(M, rhs.reshape(-1))
+    # The dense LU solve, refined with residuals in extended precision: accurate to
+    # well below 1e-12 (its own forward error is up to cond * eps).
+    for _ in range(2):
+        res = M.astype(np.longdouble) @ dense.astype(np.longdouble) - rhs.reshape(-1)
+        dense = dense - np.linalg.solve(M, res.astype(np.float64))
+    bt = _linalg.block_tridiagonal_jacobian(lambda u: fn(u, scene), y, 1)
+    Mb = bt.scale_shift(1.0, -c)
+    fac = _linalg.factor(Mb)
+    x = fac.solve(jnp.asarray(rhs))
+    xf = np.asarray(x).reshape(-1)
+    backward = np.max(np.abs(M @ xf - rhs.reshape(-1))) / (
+        np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(xf))
+    )
+    assert backward < 1e-15, backward
+    forward = np.max(np.abs(xf - dense)) / np.max(np.abs(dense))
+    assert forward < 1e-8, forward
+    refined = x + fac.solve(jnp.asarray(rhs) - Mb.matvec(x))
+    err = np.max(np.abs(np.asarray(refined).reshape(-1) - dense)) / np.max(
+        np.abs(dense)
+    )
+    # the dense reference itself carries cond(M) * eps of error (~1e-11 at EA = 1e4)
+    assert err < 1e-9, err
+
+
+def test_block_inverse_pivots():
+    a = np.random.default_rng(1).standard_normal((30, 6, 6))
+    a[:, 0, 0] = 0.0  # a zero leading entry needs a row exchange
+    err = np.max(np.abs(np.asarray(_linalg.small_inv(a)) - np.linalg.inv(a)))
+    assert err < 1e-10, err
+
+
+# ---------------------------------------------------------------------------
+# String pendulum: agreement with a tight reference, fixed-step paper setting
+# ---------------------------------------------------------------------------
+
+
+@functools.cache
+def _reference(formulation, k, EA, t1):
+    scene = js.scenes.string_pendulum(formulation, k=k, EA=EA, t1=t1)
+    ts = jnp.linspace(0.0, t1, 5)
+    return js.simulate(scene, "kvaerno5", rtol=1e-11, atol=1e-11, ts=ts)
+
+
+def _err(traj, ref):
+    return float(np.max(np.linalg.norm(traj.end_mass - ref.end_mass, axis=1)))
+
+
+@pytest.mark.parametrize("formulation", ("displacement", "angle"))
+def test_rodas5p_agrees_with_kvaerno5_reference(formulation):
+    ref = _reference(formulation, 6, 1e4, 0.4)
+    scene = js.scenes.string_pendulum(formulation, k=6, EA=1e4, t1=0.4)
+    traj = js.simulate(scene, "rodas5p", rtol=1e-8, atol=1e-8, ts=ref.ts)
+    assert traj.ok, traj.status
+    assert _err(traj, ref) < 1e-6, _err(traj, ref)
+
+
+@pytest.mark.parametrize("solver", ("theta", "newmark"))
+def test_fixed_step_solvers_second_order_on_string(solver):
+    ref = _reference("displacement", 6, 1e4, 0.4)
+    scene = js.scenes.string_pendulum("displacement", k=6, EA=1e4, t1=0.4)
+    dts = (0.004, 0.002, 0.001)
+    errs = []
+    for dt in dts:
+        traj = js.simulate(scene, solver, dt0=dt, rtol=1e-10, atol=1e-10, ts=ref.ts)
+        assert traj.ok, traj.status
+        assert int(traj.stats["num_accepted_steps"]) == round(0.4 / dt)
+        errs.append(_err(traj, ref))
+    slope = fitted_order(dts, errs)
+    assert 1.8 < slope < 2.3, (slope, errs)
+
+
+@pytest.mark.parametrize("solver", ("theta", "newmark"))
+def test_fixed_step_paper_setting_runs(solver):
+    # The paper's setting: dt = 0.005, 400 steps over 2 s, EA = 1e6. Measured
+    # end-mass error against Rodas5P at 1e-9: 5.2e-3 m (implicit Euler: 0.24 m).
+    scene = js.scenes.string_pendulum("displacement", k=10, EA=1e6, t1=2.0)
+    ts = jnp.linspace(0.0, 2.0, 9)
+    ref = js.simulate(scene, "rodas5p", rtol=1e-9, atol=1e-9, ts=ts)
+    traj = js.simulate(scene, solver, dt0=0.005, rtol=1e-7, atol=1e-7, ts=ts)
+    assert traj.ok, traj.status
+    assert int(traj.stats["num_accepted_steps"]) == 400
+    assert _err(traj, ref) < 2e-2, _err(traj, ref)
+
+
+def test_newton_refresh_removes_displacement_rejections():
+    # Displacement variables at EA = 1e9: a Jacobian frozen at the stage predictor
+    # contracts at a rate near 1 (the stiff axial force turns with the string), so
+    # nearly every larger step failed in Newton. Refreshing the Jacobian at the
+    # iterate removes most attempts, at the same answer.
+    scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
+    ts = jnp.linspace(0.0, 0.2, 3)
+    runs = {}
+    for refresh in (False, True):
+        rf = StageNewton(rtol=1e-6, atol=1e-6, refresh=refresh)
+        solver = dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
+        runs[refresh] = js.simulate(scene, solver, rtol=1e-6, atol=1e-6, ts=ts)
+    assert runs[False].ok and runs[True].ok
+    attempts = {r: int(t.stats["num_steps"]) for r, t in runs.items()}
+    assert attempts[True] * 5 < attempts[False], attempts
+    assert _err(runs[True], runs[False]) < 1e-5
