@@ -5,7 +5,7 @@ import math
 from ._effects import EFFECTS, Gravity, KelvinVoigt, Slack
 from ._tether_scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
 from ._tanker_scenes import (
-    ENVIRONMENTS as TANDEM_ENVIRONMENTS,
+    ENVIRONMENTS as TANDEM_ENVIRONMENTS,  # noqa: F401  (re-export)
     tandem_controlled as tandem_controlled,
     tandem_equilibria as tandem_equilibria,
     tandem_fishtail as tandem_fishtail,
