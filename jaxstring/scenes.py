@@ -3,7 +3,8 @@
 import math
 
 from ._effects import EFFECTS, Gravity, KelvinVoigt, Slack
-from ._tether_scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
+from ._scene import Scene
+from ._string import FORMULATIONS
 from ._tanker_scenes import (
     ENVIRONMENTS as TANDEM_ENVIRONMENTS,  # noqa: F401  (re-export)
     tandem_controlled as tandem_controlled,
@@ -12,8 +13,7 @@ from ._tanker_scenes import (
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
 )
-from ._scene import Scene
-from ._string import FORMULATIONS
+from ._tether_scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
 from ._validate import (
     check_angle,
     check_choice,
