@@ -164,12 +164,21 @@ def component_costs(k, EA=1e6, reps=200):
     }
 
 
-def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
+def main(
+    quick=False,
+    solvers=None,
+    repeats=3,
+    suffix="",
+    scaling=True,
+    kmax=None,
+    table1=True,
+):
     tag = ("_quick" if quick else "") + suffix
     k = 10 if quick else 40
     t1 = 0.5 if quick else 2.0
     EAs = (1e4, 1e6) if quick else (1e4, 1e6, 1e9)
     ks = (10, 20, 40) if quick else (40, 80, 160, 320, 640, 1280)
+    ks = tuple(kk for kk in ks if kmax is None or kk <= kmax)
     cvode_kmax = 40 if quick else 320
     rtol = atol = 1e-6
     have_cvode = importlib.util.find_spec("sksundae") is not None
@@ -177,7 +186,7 @@ def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
     print(f"CVODE (scikit-sundae): {'yes' if have_cvode else 'not installed'}")
 
     rows = []
-    for EA in EAs:
+    for EA in EAs if table1 else ():
         scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
         ts = jnp.linspace(0.0, t1, 201)
         t0 = time.perf_counter()
@@ -240,9 +249,14 @@ def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
     ]
     if not have_cvode:
         notes.append("CVODE not measured: scikit-sundae is not installed here.")
-    write_table(
-        f"bench_solvers{tag}", rows, cols, "Solvers on the stiff string pendulum", notes
-    )
+    if table1:
+        write_table(
+            f"bench_solvers{tag}",
+            rows,
+            cols,
+            "Solvers on the stiff string pendulum",
+            notes,
+        )
 
     if not scaling:
         return rows, None, None
@@ -305,7 +319,8 @@ def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
     ax[0, 0].set_xlabel("EA (N)")
     ax[0, 0].set_ylabel("wall time after compile (s)")
     ax[0, 0].set_title(f"k = {k}, {t1} s, rtol = atol = 1e-6")
-    ax[0, 0].legend(fontsize=6)
+    if rows:
+        ax[0, 0].legend(fontsize=6)
     for label, p in fits.items():
         pts = [(r["k"], r["run_s"]) for r in scal if r["solver"] == label and r["ok"]]
         kk, tt = np.array(pts).T
@@ -314,7 +329,7 @@ def main(quick=False, solvers=None, repeats=3, suffix="", scaling=True):
     ax[0, 1].set_ylabel("wall time after compile (s)")
     ax[0, 1].set_title("EA = 1e6")
     ax[0, 1].legend(fontsize=7)
-    savefig(fig, f"bench_solvers{tag}")
+    savefig(fig, f"bench_solvers{tag}" + ("" if table1 else "_scaling"))
     return rows, scal, comp
 
 
@@ -325,6 +340,12 @@ if __name__ == "__main__":
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--suffix", default="", help="appended to the output names")
     p.add_argument("--no-scaling", action="store_true", help="table 1 only")
+    p.add_argument(
+        "--kmax", type=int, default=None, help="largest k of the scaling run"
+    )
+    p.add_argument(
+        "--scaling-only", action="store_true", help="skip table 1 (solvers x EA)"
+    )
     a = p.parse_args()
     main(
         quick=a.quick or bool(os.environ.get("SMOKE_TEST")),
@@ -332,4 +353,6 @@ if __name__ == "__main__":
         repeats=a.repeats,
         suffix=a.suffix,
         scaling=not a.no_scaling,
+        kmax=a.kmax,
+        table1=not a.scaling_only,
     )

@@ -4,6 +4,10 @@ from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
     scenes as scenes,
 )
+from ._control import (
+    ComputedForcePD as ComputedForcePD,
+    NonlinearCompensator as NonlinearCompensator,
+)
 from ._effects import (
     AbstractEffect as AbstractEffect,
     AbstractLoad as AbstractLoad,
@@ -13,6 +17,23 @@ from ._effects import (
     Kinematics as Kinematics,
     Loads as Loads,
     Slack as Slack,
+)
+from ._fit import (
+    FitResult as FitResult,
+    fit as fit,
+    gauss_newton as gauss_newton,
+    value_and_grad as value_and_grad,
+)
+from ._hydro import (
+    AbstractCurrent as AbstractCurrent,
+    AbstractTetherLoad as AbstractTetherLoad,
+    Buoyancy as Buoyancy,
+    DepthProfileCurrent as DepthProfileCurrent,
+    Drag as Drag,
+    FunctionCurrent as FunctionCurrent,
+    TetherKinematics as TetherKinematics,
+    UniformCurrent as UniformCurrent,
+    Weight as Weight,
 )
 from ._presets import ACCURACY_PRESETS as ACCURACY_PRESETS
 from ._root_finder import StageNewton as StageNewton
@@ -25,60 +46,7 @@ from ._string import (
     NaturalAngleString as NaturalAngleString,
     NaturalTangentString as NaturalTangentString,
 )
-from ._fit import (
-    fit as fit,
-    FitResult as FitResult,
-    gauss_newton as gauss_newton,
-    value_and_grad as value_and_grad,
-)
-from ._sweep import sweep as sweep, SweepResult as SweepResult
-from ._hydro import (
-    AbstractCurrent as AbstractCurrent,
-    AbstractTetherLoad as AbstractTetherLoad,
-    Buoyancy as Buoyancy,
-    DepthProfileCurrent as DepthProfileCurrent,
-    Drag as Drag,
-    FunctionCurrent as FunctionCurrent,
-    TetherKinematics as TetherKinematics,
-    UniformCurrent as UniformCurrent,
-    Weight as Weight,
-)
-from ._tether import (
-    AbstractEnd as AbstractEnd,
-    AbstractTether as AbstractTether,
-    AceamTether as AceamTether,
-    arc_state as arc_state,
-    CoupledEnd as CoupledEnd,
-    EndKinematics as EndKinematics,
-    ExactTether as ExactTether,
-    FixedEnd as FixedEnd,
-    FreeEnd as FreeEnd,
-    hanging_state as hanging_state,
-    LmsTether as LmsTether,
-    PiecewiseLinear as PiecewiseLinear,
-    PrescribedEnd as PrescribedEnd,
-)
-from ._trajectory import Trajectory as Trajectory
-from ._vessel import (
-    AbstractActuator as AbstractActuator,
-    AbstractVesselLoad as AbstractVesselLoad,
-    ConstantThrust as ConstantThrust,
-    fpso_hull as fpso_hull,
-    Hawser as Hawser,
-    Hull as Hull,
-    LinearDamping as LinearDamping,
-    make_hull as make_hull,
-    MooredFPSO as MooredFPSO,
-    OCIMFWind as OCIMFWind,
-    ShortWingCurrent as ShortWingCurrent,
-    shuttle_hull as shuttle_hull,
-    Tandem as Tandem,
-    TurretMooring as TurretMooring,
-)
-from ._control import (
-    ComputedForcePD as ComputedForcePD,
-    NonlinearCompensator as NonlinearCompensator,
-)
+from ._sweep import SweepResult as SweepResult, sweep as sweep
 from ._tanker_analysis import (
     controlled_metrics as controlled_metrics,
     find_equilibria as find_equilibria,
@@ -88,6 +56,38 @@ from ._tanker_analysis import (
     pitchfork_sweep as pitchfork_sweep,
     solve_equilibrium as solve_equilibrium,
     stability as stability,
+)
+from ._tether import (
+    AbstractEnd as AbstractEnd,
+    AbstractTether as AbstractTether,
+    AceamTether as AceamTether,
+    CoupledEnd as CoupledEnd,
+    EndKinematics as EndKinematics,
+    ExactTether as ExactTether,
+    FixedEnd as FixedEnd,
+    FreeEnd as FreeEnd,
+    LmsTether as LmsTether,
+    PiecewiseLinear as PiecewiseLinear,
+    PrescribedEnd as PrescribedEnd,
+    arc_state as arc_state,
+    hanging_state as hanging_state,
+)
+from ._trajectory import Trajectory as Trajectory
+from ._vessel import (
+    AbstractActuator as AbstractActuator,
+    AbstractVesselLoad as AbstractVesselLoad,
+    ConstantThrust as ConstantThrust,
+    Hawser as Hawser,
+    Hull as Hull,
+    LinearDamping as LinearDamping,
+    MooredFPSO as MooredFPSO,
+    OCIMFWind as OCIMFWind,
+    ShortWingCurrent as ShortWingCurrent,
+    Tandem as Tandem,
+    TurretMooring as TurretMooring,
+    fpso_hull as fpso_hull,
+    make_hull as make_hull,
+    shuttle_hull as shuttle_hull,
 )
 
 
