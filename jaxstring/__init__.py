@@ -24,6 +24,7 @@ from ._fit import (
     gauss_newton as gauss_newton,
     value_and_grad as value_and_grad,
 )
+from ._fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
 from ._hydro import (
     AbstractCurrent as AbstractCurrent,
     AbstractTetherLoad as AbstractTetherLoad,
@@ -37,6 +38,7 @@ from ._hydro import (
 )
 from ._presets import ACCURACY_PRESETS as ACCURACY_PRESETS
 from ._root_finder import StageNewton as StageNewton
+from ._rosenbrock import Rodas5P as Rodas5P
 from ._scene import Scene as Scene
 from ._simulate import simulate as simulate
 from ._solvers import SOLVERS as SOLVERS

@@ -118,9 +118,13 @@ def simulate(
     **Arguments:**
 
     - `scene`: a `Scene` (see `jaxstring.scenes`).
-    - `solver`: a name -- `"kvaerno3"`, `"kvaerno4"`, `"kvaerno5"` (default),
-      `"implicit_euler"` (adaptive), `"implicit_euler_fixed"` (fixed step `dt0`),
-      `"tsit5"`, `"dopri5"` -- or any `diffrax.AbstractSolver` instance.
+    - `solver`: a name from `jaxstring.SOLVERS` (each with a one-line description
+      there) or any `diffrax.AbstractSolver` instance. Adaptive implicit:
+      `"kvaerno3"`, `"kvaerno4"`, `"kvaerno5"` (default), `"implicit_euler"`,
+      `"rodas5p"` (Rosenbrock, one Jacobian per step: the fastest here on stiff
+      strings). Fixed step `dt0`: `"implicit_euler_fixed"`, `"theta"`/`"trapezoid"`
+      (theta = 1/2), `"newmark"`; other theta: pass `jaxstring.ThetaMethod(theta)`.
+      Explicit: `"tsit5"`, `"dopri5"`.
     - `rtol`, `atol`: error tolerances of the step-size controller (> 0).
     - `ts`: save times, s (default: `n_save` equally spaced points over the span).
     - `dt0`: initial step, s (default: chosen by the controller); the step of a
