@@ -683,9 +683,16 @@ class AceamTether(AbstractTether):
     proportional links F = k (l - g)/L_link.
 
     **Arguments:** as `AbstractTether`, plus `T`, `T1` (s), `k` (end-link stiffness,
-    N; Table 1: 10000 N) and `feedforward` (structure): add the target's own rates
-    to the reference model, a_m = g'' + ((g - l)/T + g' - l')/T1, which removes the
-    lag T g' of a paying-out link (False: the paper's law).
+    N; Table 1: 10000 N) and `feedforward` (structure): apply the reference model
+    to the tracking error e = l - g, e'' = -(e/T + e')/T1, i.e.
+    a_m = g'' + ((g - l)/T + g' - l')/T1. It equals the paper's law wherever the
+    target is constant and removes the steady lag l - g = -T g' (0.05 m at 0.5 m/s)
+    of the link being paid out or hauled in (False: the law as printed; the
+    `tether_winch` scene uses True).
+
+    The fixed-length error (L_r - L_a)/L_r is the stretch of the two proportional
+    end links, (|F_root| + |F_fast|) L_link/(k L_r), to within ~3e-5 (the regulated
+    links' errors cancel in the sum): it measures the end forces, not the regulator.
     """
 
     L: Float[Array, ""] = _param()

@@ -18,7 +18,24 @@ Choices the paper leaves open (stated here so that they can be changed):
 - end-link law F = k (l - g)/L_link with L_link = L/(N + 1) (the paper's
   proportional law; it also holds for a zero target length on the drum);
 - haul-in speed during the rise: 0.5 m/s (not given in the paper; with the stated
-  0.5 m/s pay-out the released length returns to the full 100 m at t = 70 s).
+  0.5 m/s pay-out the released length returns to the full 100 m at t = 70 s);
+- drag areas: the paper gives "characteristic areas D_t, D_n, D_l which depend on the
+  element length and the diameter" without formulas. Here all three are the
+  projected area d l_e (`tangential_area="projected"`), so that c_t = 0.1 and
+  c_n = 1 of Table 1 refer to the same area. The alternative, tangential drag on
+  the wetted surface pi d l_e (`"wetted"`), makes the tangential force pi times
+  larger and contradicts the paper's own result: the paper attributes its length
+  error entirely to the two proportional end links, whose stretch is
+  |F| L_link/k, so its 0.03 % bound (k = 10000 N, L_link = 100/102 m) means
+  |F_root| + |F_fast| <= 0.0003 L_r k/L_link = 306 N at all times. With the wetted
+  area the exact constraint tensions (no regulator involved) reach 83 + 399 N at
+  t = 70 s, while the running end is towed against the current (4.7e-4 from two
+  proportional end links alone); with the projected area they stay below 296 N;
+- winch law: the reference model of the paper applied to the tracking error e = l - g,
+  e'' = -(e/T + e')/T1 (`feedforward=True`, the default of `tether_winch`). It is the
+  paper's law wherever the target is constant (every link but the one being paid
+  out or hauled in); the law as printed leaves that link lagging by T dg/dt
+  (0.05 m at 0.5 m/s, 5.7e-4 of L_r on its own) and is kept as `feedforward=False`.
 """
 
 import jax.numpy as jnp
@@ -34,6 +51,9 @@ from ._tether import (
     arc_state,
 )
 from ._validate import check_choice, check_int, check_nonnegative, check_positive
+
+
+TANGENTIAL_AREAS = ("projected", "wetted")
 
 
 PAPER_TIMES = (0.0, 10.0, 35.0, 45.0, 70.0)
@@ -122,6 +142,7 @@ def tether_fixed(
     end_links: str = "rigid",
     feedforward: bool = False,
     released=None,
+    tangential_area: str = "projected",
     name: str = "tether-fixed",
 ) -> Scene:
     """The paper's tether at a fixed released length (section 5.1, Fig 5).
@@ -139,9 +160,12 @@ def tether_fixed(
     - `k_lms` (N), `c_lms` (N s): LMS springs. `omega` (1/s), `end_links`: exact.
     - `feedforward`: ACEAM reference model with the target's rates.
     - `released`: released length at `times`, m (None: fixed at `L`).
+    - `tangential_area`: reference area D_t of `c_t`, `"projected"` (d l_e, the
+      area of `c_n`; default, see the module docstring) or `"wetted"` (pi d l_e).
     """
     _check_common(N, L, d, rho, t1)
     check_nonnegative("added_mass", added_mass)
+    check_choice("tangential_area", tangential_area, TANGENTIAL_AREAS)
     fast = PrescribedEnd(times, fast_path, smoothing=smoothing)
     schedule = None
     if released is not None:
@@ -165,10 +189,12 @@ def tether_fixed(
         released=schedule,
         feedforward=feedforward,
     )
+    c_t_drag = c_t / np.pi if tangential_area == "projected" else c_t
     effects = (
         Weight(g=g),
         Buoyancy(g=g),
-        Drag(c_t=c_t, c_n=c_n, c_l=c_l, current=UniformCurrent(current)),
+        # `Drag` takes D_t = pi d l_e; c_t on d l_e is c_t/pi on pi d l_e.
+        Drag(c_t=c_t_drag, c_n=c_n, c_l=c_l, current=UniformCurrent(current)),
     )
     y0 = arc_state(model, bulge=(-1.0, 0.0, 0.0), t0=float(np.asarray(times)[0]))
     return Scene(model=model, effects=effects, y0=y0, t1=t1, name=f"{name}/{method}")
@@ -180,6 +206,7 @@ def tether_winch(
     payout_speed: float = 0.5,
     times=PAPER_TIMES,
     released=None,
+    feedforward: bool = True,
     **kw,
 ) -> Scene:
     """The paper's tether with pay-out and haul-in (section 4.5, Fig 6).
@@ -187,7 +214,9 @@ def tether_winch(
     The released length is L (0-10 s), hauled in at `haul_speed` m/s while the
     running end rises (10-35 s), held (35-45 s) and paid out at `payout_speed` m/s
     during the forward motion (45-70 s); or any `released` schedule at `times` (m).
-    Other arguments as `tether_fixed`.
+    `feedforward`: ACEAM reference model on the tracking error (default; False: the
+    law as printed, which lags a paying-out link by T dg/dt). Other arguments as
+    `tether_fixed`.
     """
     check_nonnegative("haul_speed", haul_speed, "m/s")
     check_nonnegative("payout_speed", payout_speed, "m/s")
@@ -201,5 +230,10 @@ def tether_winch(
         hauled = L - haul_speed * (t[2] - t[1])
         released = (L, L, hauled, hauled, hauled + payout_speed * (t[4] - t[3]))
     return tether_fixed(
-        method=method, times=times, released=released, name="tether-winch", **kw
+        method=method,
+        times=times,
+        released=released,
+        feedforward=feedforward,
+        name="tether-winch",
+        **kw,
     )

@@ -67,29 +67,60 @@ def _between(t, lo, hi):
 # The paper's scenarios (section 5, Table 1)
 
 
-def test_aceam_fixed_length_error_is_end_link_stretch():
-    # Paper, Fig 5b: the length error stays below 0.03 % and "is caused by the
-    # inboard and running links" (the only elastic ones). Here, away from the
-    # schedule's corners (1.5 s after each), the regulated links add less than
-    # 3e-5 of L to it; their own errors (up to ~1 % of a link in the tight loop of
-    # the last 20 s, see the report) cancel in the sum.
-    scene, traj = paper_run("fixed", "aceam")
+def _end_link_share(scene, traj):
+    """Part of (L_r - L_a)/L_r due to the two proportional end links, from the end
+    forces alone: a link of tension |F| is stretched by |F| L_link/k."""
     m = scene.model
+    F = np.linalg.norm(np.asarray(traj.root_force), axis=1) + np.linalg.norm(
+        np.asarray(traj.fast_force), axis=1
+    )
+    L_r = np.asarray(traj.released_length)
+    return -F * float(m.link_length) / (float(m.k) * L_r)
+
+
+def _quiet(t, knots=(0.0, 10.0, 35.0, 45.0), after=3.0):
+    """Away from the schedule's corners, where the end velocity jumps (and from the
+    first seconds of settling from the arc-shaped initial state)."""
+    quiet = np.ones_like(np.asarray(t), bool)
+    for knot in knots:
+        quiet &= ~_between(t, knot - 0.1, knot + after)
+    return quiet
+
+
+def test_aceam_fixed_length_error_below_paper_bound_over_70s():
+    # Paper, Fig 5b: (L_r - L_a)/L_r stays below 0.03 % during the whole 70 s and
+    # "is caused by the inboard and running links" (the only elastic ones). Away
+    # from the corners (3 s after each) the regulated links add less than 3e-5 of
+    # L to the end-link stretch predicted from the end forces (their own errors,
+    # up to ~1 % of a link in the tight loop of the last 25 s, cancel in the sum).
+    scene, traj = paper_run("fixed", "aceam")
     err = np.asarray(traj.length_error)
-    strain = np.asarray(traj.strain)
-    regulated = strain[:, 1:-1].sum(axis=1) * float(m.link_length) / float(m.L)
-    t = np.asarray(traj.ts)
-    quiet = np.ones_like(t, bool)
-    for knot in (0.0, 10.0, 35.0, 45.0):
-        quiet &= ~_between(t, knot - 0.1, knot + 1.5)
-    assert np.max(np.abs(regulated[quiet])) < 3e-5
-    # Below the paper's 0.03 % while the end forces stay below ~150 N (0-45 s).
-    assert np.max(np.abs(err[_between(t, 0, 45)])) < 3e-4
-    # During the forward motion against the current the running-end force reaches
-    # ~400 N and its link alone stretches by 0.039 % of L (see the report).
-    F_f = np.linalg.norm(np.asarray(traj.fast_force), axis=1)
-    assert np.max(F_f) > 350
-    assert np.max(np.abs(err)) < 5e-4
+    assert traj.ts[-1] == 70.0
+    assert np.max(np.abs(err)) < 3e-4
+    share = _end_link_share(scene, traj)
+    quiet = _quiet(traj.ts)
+    assert np.max(np.abs(err - share)[quiet]) < 3e-5
+    # A model error, not a solver error: 100 times tighter tolerances change the
+    # maximum by less than 1 %.
+    tight = js.simulate(scene, "dopri5", rtol=1e-8, atol=1e-8, ts=PAPER_TS)
+    err8 = np.asarray(tight.length_error)
+    np.testing.assert_allclose(np.max(np.abs(err8)), np.max(np.abs(err)), rtol=1e-2)
+
+
+@pytest.mark.slow
+def test_wetted_tangential_area_breaks_the_paper_bound_through_end_forces():
+    # With c_t on the wetted surface pi d l_e, towing the running end against the
+    # current (45-70 s) loads it with ~400 N; its proportional link then stretches
+    # by ~0.04 % of L on its own, whatever the tension method (here the exact
+    # chain's end forces predict ACEAM's error): the paper's 0.03 % implies the
+    # smaller tangential drag of the projected area d l_e.
+    scene, traj = paper_run("fixed", "aceam", tangential_area="wetted")
+    _, exact = paper_run("fixed", "exact", tangential_area="wetted")
+    err = np.asarray(traj.length_error)
+    late = _between(traj.ts, 50, 70)
+    assert np.max(np.abs(err[late])) > 4e-4
+    share_exact = _end_link_share(scene, exact)
+    np.testing.assert_allclose(err[late], share_exact[late], rtol=0.05)
 
 
 def test_exact_fixed_length_error_below_1e6():
@@ -101,10 +132,11 @@ def test_exact_fixed_length_error_below_1e6():
 
 
 def test_aceam_winch_length_error_and_end_tension_changes():
-    # Paper, Fig 6: with pay-out/haul-in the error stays below 0.07 %; hauling in
-    # raises the end tensions, paying out lowers them.
-    _, traj = paper_run("winch", "aceam", feedforward=True)
+    # Paper, Fig 6: with pay-out/haul-in the error stays below 0.07 % during the
+    # whole 70 s; hauling in raises the end tensions, paying out lowers them.
+    _, traj = paper_run("winch", "aceam")
     _, fixed = paper_run("fixed", "aceam")
+    assert traj.ts[-1] == 70.0
     assert np.max(np.abs(np.asarray(traj.length_error))) < 7e-4
     L_r = np.asarray(traj.released_length)
     np.testing.assert_allclose(L_r[_between(traj.ts, 36, 44)], 87.5, rtol=1e-12)
@@ -113,6 +145,25 @@ def test_aceam_winch_length_error_and_end_tension_changes():
     hauling, paying = _between(traj.ts, 12, 34), _between(traj.ts, 48, 68)
     assert np.median(F[hauling] / F0[hauling]) > 1.5
     assert np.median(F[paying] / F0[paying]) < 0.6
+
+
+def test_aceam_winch_law_as_printed_lags_by_T_times_haul_speed():
+    # The reference model as printed, a = ((g - l)/T - l')/T1, follows a ramp
+    # target g' = -v (hauling in) with the steady lag l - g = T v: the partial
+    # link is 0.05 m too long at 0.5 m/s, 5.7e-4 of L_r on its own. Applied to the
+    # tracking error (the default) the lag vanishes.
+    scene, paper = paper_run("winch", "aceam", feedforward=False)
+    _, ff = paper_run("winch", "aceam")
+    m = scene.model
+    T, v, L_link = float(m.T), 0.5, float(m.link_length)
+    hauling = _between(paper.ts, 13, 34)
+    L_c = float(m.L) - np.asarray(paper.released_length)[hauling]
+    q = np.floor(L_c / L_link).astype(int)  # the partial link (paper eq 7)
+    rows = np.arange(q.size)
+    for traj, lag in ((paper, T * v), (ff, 0.0)):
+        stretch = np.asarray(traj.strain)[hauling][rows, q] * L_link
+        assert abs(np.median(stretch) - lag) < 0.1 * T * v
+    assert np.max(np.abs(np.asarray(paper.length_error))) > 7e-4
 
 
 def test_exact_winch_length_error_below_1e6():
@@ -128,13 +179,16 @@ def test_exact_winch_length_error_below_1e6():
 
 
 def test_aceam_and_exact_end_forces_agree_for_gentle_bending():
-    # The paper's line bends gently (about 4 deg between links): ACEAM's axial
-    # projection costs nothing measurable. Compared away from the schedule knots.
+    # The paper's line bends gently (up to ~20 deg between links): ACEAM's axial
+    # projection costs nothing measurable. Compared 4 s after each knot, once the
+    # regulated links' transients from the end-velocity jump (sharp schedule for
+    # ACEAM, 1 s ramps for the rigidly held exact chain) have decayed: in the
+    # first second after a knot the end forces differ by up to ~1.2 %.
     _, a = paper_run("fixed", "aceam")
     _, e = paper_run("fixed", "exact", smoothing=1.0)
     t = np.asarray(a.ts)
     sel = np.zeros_like(t, bool)
-    for lo, hi in ((4, 9.4), (13, 34.4), (38, 44.4), (48, 69.4)):
+    for lo, hi in ((4, 9.4), (14, 34.4), (39, 44.4), (49, 69.4)):
         sel |= _between(t, lo, hi)
     for name in ("root_force", "fast_force"):
         fa, fe = np.asarray(getattr(a, name))[sel], np.asarray(getattr(e, name))[sel]
@@ -508,6 +562,7 @@ def test_end_kinematics_type():
         (lambda: tether_fixed(times=(0.0, 10.0, 10.0, 45.0, 70.0)), "`times`"),
         (lambda: PiecewiseLinear((0.0, 2.0, 1.0), (1.0, 2.0, 3.0)), "`times`"),
         (lambda: tether_fixed(method="acem"), "method"),
+        (lambda: tether_fixed(tangential_area="wet"), "tangential_area"),
         (lambda: DepthProfileCurrent(z=(0.0, -10.0), velocity=((1, 0, 0),) * 2), "`z`"),
         (lambda: Drag(c_n=-1.0), "`c_n`"),
         (lambda: UniformCurrent((1.0, 0.0)), "`velocity`"),
