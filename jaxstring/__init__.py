@@ -4,6 +4,7 @@ from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
     scenes as scenes,
 )
+from ._bdf import BDF as BDF
 from ._control import (
     ComputedForcePD as ComputedForcePD,
     NonlinearCompensator as NonlinearCompensator,

@@ -2,6 +2,7 @@
 
 import diffrax as dfx
 
+from ._bdf import BDF
 from ._fixed_step import Newmark, ThetaMethod
 from ._root_finder import StageNewton
 from ._rosenbrock import Rodas5P
@@ -45,6 +46,7 @@ SOLVERS = {
     ),
     "tsit5": ("explicit Tsitouras 5(4)", True, False),
     "dopri5": ("explicit Dormand-Prince 5(4)", True, False),
+    "bdf": ("variable-order BDF/NDF 1-5, reused Jacobian (as CVODE)", True, True),
 }
 
 _MAX_ITERS_ADAPTIVE = 10
@@ -93,4 +95,6 @@ def build_solver(solver, newton_rtol, newton_atol):
         return dfx.Tsit5()
     if solver == "dopri5":
         return dfx.Dopri5()
+    if solver == "bdf":
+        return BDF(rtol=newton_rtol, atol=newton_atol)
     raise AssertionError(solver)

@@ -1,0 +1,186 @@
+"""Fast stiff integration (issue 4): the variable-order BDF solver against CVODE.
+
+Question: on the benchmark of ``bench_solvers.py`` (string pendulum in displacement
+variables, k = 40, alpha = 0.01, 2 s, rtol = atol = 1e-6, EA in {1e4, 1e6, 1e9}),
+how fast is ``simulate(scene, "bdf")`` after compilation, with how many steps and
+rejections, at what end-mass error, next to Rodas5P, CVODE (scikit-sundae, BDF, band
+solver, JAX RHS and banded JAX Jacobian through callbacks) and scipy's BDF (the
+algorithm ported; sparse JAX Jacobian) -- all in the same run.
+
+Error: max over 201 save times of the end-mass distance to Rodas5P at
+rtol = atol = 1e-10. Times: median of repeats after compile; compile separately.
+
+Writes experiments/results/bench_bdf{,_quick}.{md,csv}.
+Run: ``python experiments/bench_bdf.py [--quick]`` (quick: k = 10, 0.5 s,
+EA in {1e4, 1e6}; about a minute).
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import importlib.util
+import sys
+import time
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import jax.numpy as jnp
+import numpy as np
+from _common import end_mass_error, fmt, timed_split, write_table
+from bench_solvers import run_cvode, run_solver
+
+import jaxstring as js
+
+
+def run_scipy_bdf(scene, ts, rtol, atol, repeats):
+    """scipy.integrate.solve_ivp(method="BDF") with the sparse JAX Jacobian; step
+    count from its own step sequence (no t_eval), save times from dense output."""
+    from references import JaxRHS
+    from scipy.integrate import solve_ivp
+
+    rhs = JaxRHS(scene)
+    out = {}
+
+    def go():
+        rhs.reset()
+        out["sol"] = solve_ivp(
+            rhs.f,
+            (rhs.t0, rhs.t1),
+            rhs.y0,
+            method="BDF",
+            rtol=rtol,
+            atol=atol,
+            jac=rhs.jac_sparse,
+            dense_output=True,
+        )
+        return out["sol"]
+
+    tm, _ = timed_split(rhs.compile, go, repeats)
+    sol = out["sol"]
+    row = {
+        "solver": "scipy BDF (sparse JAX Jacobian)",
+        "ok": bool(sol.success),
+        "status": str(sol.message)[:60],
+        "compile_s": tm.compile_s,
+        "run_s": tm.run_s,
+        "repeats": tm.n,
+        "steps": len(sol.t) - 1,
+        "rejected": None,
+        "nfev": int(sol.nfev),
+        "njev": int(sol.njev),
+        "nlu": int(sol.nlu),
+    }
+    row["end"] = (
+        np.asarray(rhs.end_mass(sol.sol(np.asarray(ts)).T)) if sol.success else None
+    )
+    return row
+
+
+def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
+    tag = "_quick" if quick else ""
+    k = k or (10 if quick else 40)
+    t1 = 0.5 if quick else 2.0
+    EAs = EAs or ((1e4, 1e6) if quick else (1e4, 1e6, 1e9))
+    rtol = atol = 1e-6
+    have_cvode = importlib.util.find_spec("sksundae") is not None
+    print(f"CVODE (scikit-sundae): {'yes' if have_cvode else 'not installed'}")
+    rows = []
+    for EA in EAs:
+        scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
+        ts = jnp.linspace(0.0, t1, 201)
+        t0 = time.perf_counter()
+        ref = js.simulate(
+            scene, "rodas5p", rtol=1e-10, atol=1e-10, ts=ts, max_steps=4_000_000
+        )
+        ref_end = np.asarray(ref.end_mass)
+        print(
+            f"EA={EA:.0e}: reference Rodas5P 1e-10 in {time.perf_counter() - t0:.1f}s"
+            f" ({int(ref.stats['num_accepted_steps'])} steps, {ref.status})"
+        )
+        block = []
+        if have_cvode:
+            block.append(run_cvode(scene, ts, rtol, atol, repeats))
+        for name in ("bdf", "rodas5p"):
+            block.append(run_solver(scene, name, ts, rtol, atol, repeats))
+        if scipy_bdf:
+            block.append(run_scipy_bdf(scene, ts, rtol, atol, 1 if EA > 1e7 else 2))
+        cv = block[0]["run_s"] if have_cvode and block[0]["ok"] else None
+        bdf = next(r for r in block if r["solver"] == "bdf")
+        for r in block:
+            r["EA"] = EA
+            r["error_m"] = (
+                end_mass_error(r["end"], ref_end)
+                if r.get("end") is not None
+                else float("nan")
+            )
+            r["vs_cvode"] = (r["run_s"] / cv) if (cv and r.get("ok")) else None
+            r["vs_bdf"] = (
+                (r["run_s"] / bdf["run_s"]) if (bdf.get("ok") and r.get("ok")) else None
+            )
+            if r.get("steps") is not None and r.get("ok"):
+                r["us_per_attempt"] = (
+                    1e6 * r["run_s"] / max(r["steps"] + (r["rejected"] or 0), 1)
+                )
+            print(
+                f"  {r['solver']:34s} ok={r.get('ok')} run={fmt(r.get('run_s'))}s "
+                f"compile={fmt(r.get('compile_s'))}s steps={r.get('steps')} "
+                f"rej={r.get('rejected')} err={fmt(r['error_m'])} "
+                f"x CVODE={fmt(r['vs_cvode'])}",
+                flush=True,
+            )
+        rows.extend(block)
+    cols = [
+        "EA",
+        "solver",
+        "ok",
+        "run_s",
+        "compile_s",
+        "repeats",
+        "steps",
+        "rejected",
+        "us_per_attempt",
+        "nfev",
+        "njev",
+        "error_m",
+        "vs_cvode",
+        "vs_bdf",
+        "status",
+    ]
+    notes = [
+        f"String pendulum, displacement variables, k = {k}, alpha = 0.01, {t1} s, "
+        "rtol = atol = 1e-6.",
+        "error_m: max over 201 save times of the end-mass distance to Rodas5P at "
+        "rtol = atol = 1e-10. run_s: median after compile (compile_s separately); "
+        "vs_cvode, vs_bdf: run-time ratios measured in the same run.",
+        "bdf: jaxstring.simulate(scene, 'bdf') -- variable-order BDF/NDF (scipy's "
+        "algorithm), banded Jacobian reused across steps, block cyclic reduction.",
+        "scipy BDF: steps from its own step sequence; nfev/njev count JAX calls "
+        "(rejected steps are not reported by scipy).",
+    ]
+    if not have_cvode:
+        notes.append("CVODE not measured: scikit-sundae is not installed here.")
+    write_table(
+        f"bench_bdf{tag}", rows, cols, "BDF on the stiff string pendulum", notes
+    )
+    return rows
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--EA", default=None, help="comma-separated EA values, N")
+    p.add_argument("--k", type=int, default=None, help="number of elements")
+    p.add_argument("--no-scipy", action="store_true", help="skip scipy's BDF")
+    a = p.parse_args()
+    main(
+        quick=a.quick or bool(os.environ.get("SMOKE_TEST")),
+        repeats=a.repeats,
+        EAs=tuple(float(x) for x in a.EA.split(",")) if a.EA else None,
+        k=a.k,
+        scipy_bdf=not a.no_scipy,
+    )
