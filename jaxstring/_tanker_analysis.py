@@ -63,27 +63,51 @@ def residual(q, scene: Scene):
     return (tau / jnp.array([FSCALE, FSCALE, FSCALE * LSCALE])).reshape(-1)
 
 
+# Equilibrium solvers (static choice). Newton jumps far from its start and finds
+# the most roots; the trust-region least-squares solvers (Dogleg is the
+# optimistix analogue of MINPACK's hybrd) stay nearer their starts. Their
+# Cauchy termination test is often not met once the residual is at round-off
+# (rejected steps near the root), so for them a solve counts as converged by its
+# residual alone.
+_METHODS = {
+    "newton": (optx.Newton, True),
+    "dogleg": (optx.Dogleg, False),
+    "lm": (optx.LevenbergMarquardt, False),
+}
+
+
+def _check_method(method):
+    if method not in _METHODS:
+        raise ValueError(f"`method` must be one of {sorted(_METHODS)}; got {method!r}.")
+
+
 @eqx.filter_jit
-def _solve_batch(scene, q0s, rtol, atol, max_steps):
-    solver = optx.Newton(rtol=rtol, atol=atol)
+def _solve_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
+    cls, use_flag = _METHODS[method]
+    solver = cls(rtol=rtol, atol=atol)
 
     def one(q0):
         sol = optx.root_find(
             residual, solver, q0, args=scene, max_steps=max_steps, throw=False
         )
-        return sol.value, sol.result == optx.RESULTS.successful
+        ok = sol.result == optx.RESULTS.successful
+        return sol.value, ok if use_flag else jnp.ones_like(ok)
 
     q, ok = jax.vmap(one)(q0s)
     res = jax.vmap(lambda q: jnp.max(jnp.abs(residual(q, scene))))(q)
     return q, ok, res
 
 
-def solve_equilibria(scene: Scene, q0s, rtol=1e-10, atol=1e-10, max_steps=200):
-    """Newton solves from a batch of starts `q0s` (shape `(B, 3 n)`), under vmap.
+def solve_equilibria(
+    scene: Scene, q0s, rtol=1e-10, atol=1e-10, max_steps=200, method="newton"
+):
+    """Equilibrium solves from a batch of starts `q0s` (shape `(B, 3 n)`), under
+    vmap; `method` is `'newton'`, `'dogleg'` or `'lm'` (see `find_equilibria`).
 
     Returns (states `(B, 6 n)`, converged mask, max |residual|)."""
+    _check_method(method)
     q0s = jnp.asarray(q0s, dtype=jnp.float64)
-    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps)
+    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps, method)
     n = _n(scene)
     ys = jax.vmap(lambda q: state_from_q(q, n))(q)
     return np.asarray(ys), np.asarray(ok) & (np.asarray(res) < 1e-6), np.asarray(res)
@@ -204,10 +228,10 @@ def _hawser(scene):
 
 
 @eqx.filter_jit
-def _equilibria_batch(scene, q0s, rtol, atol, max_steps):
+def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
     """Solve from all starts and evaluate tension, clearance and Jacobian of each
     solution, in one compiled call."""
-    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps)
+    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps, method)
     hawser = _hawser(scene)
     ys = jax.vmap(lambda q: state_from_q(q, 2))(q)
 
@@ -244,32 +268,55 @@ def _collect(ys, ok, T, clr, J, taut_tension):
 
 
 def find_equilibria(
-    scene: Scene, n_grid=14, taut_tension=1.0, rtol=1e-10, atol=1e-10, max_steps=200
+    scene: Scene,
+    n_grid=14,
+    taut_tension=1.0,
+    rtol=1e-10,
+    atol=1e-10,
+    max_steps=200,
+    method="newton",
 ):
     """All taut-hawser equilibria of a tandem scene (spec S1).
 
-    Newton from the `n_grid` x `n_grid` starts of `grid_starts`, under vmap; keeps
-    converged solutions with T_h > `taut_tension` N, de-duplicates them (1 m,
-    0.01 rad) and classifies each by the eigenvalues of its `jacfwd` Jacobian.
-    Returns a list of `Equilibrium`, sorted by FPSO heading.
+    Solves from the `n_grid` x `n_grid` starts of `grid_starts`, under vmap; keeps
+    converged solutions (max |residual| < 1e-6) with T_h > `taut_tension` N,
+    de-duplicates them (1 m, 0.01 rad) and classifies each by the eigenvalues of
+    its `jacfwd` Jacobian. Returns a list of `Equilibrium`, sorted by FPSO heading.
+
+    `method`: `'newton'` (optimistix Newton, the default: it finds the most
+    roots), `'dogleg'` (Powell dogleg trust region, the optimistix analogue of
+    MINPACK hybrd) or `'lm'` (Levenberg-Marquardt; slow to converge here, finds
+    the fewest). The counts of the non-admissible (overlapping-hull) roots depend
+    on the method; no method reproduces every cell of the spec's table (see
+    experiments/results/tanker_equilibria_methods.md).
     """
+    _check_method(method)
     if not isinstance(scene.model, Tandem):
         raise ValueError("`find_equilibria` needs a Tandem scene.")
     _hawser(scene)
-    out = _equilibria_batch(scene, grid_starts(scene, n_grid), rtol, atol, max_steps)
+    out = _equilibria_batch(
+        scene, grid_starts(scene, n_grid), rtol, atol, max_steps, method
+    )
     return _collect(*out, taut_tension)
 
 
 def find_equilibria_map(
-    scenes, n_grid=14, taut_tension=1.0, rtol=1e-10, atol=1e-10, max_steps=200
+    scenes,
+    n_grid=14,
+    taut_tension=1.0,
+    rtol=1e-10,
+    atol=1e-10,
+    max_steps=200,
+    method="newton",
 ):
     """`find_equilibria` for several scenes of one structure (e.g. a wind map),
     all solved in one vmapped, compiled call. Returns a list of lists."""
+    _check_method(method)
     scenes = list(scenes)
     batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
     q0s = jnp.stack([grid_starts(sc, n_grid) for sc in scenes])
     solve = eqx.filter_vmap(
-        lambda sc, q0: _equilibria_batch(sc, q0, rtol, atol, max_steps)
+        lambda sc, q0: _equilibria_batch(sc, q0, rtol, atol, max_steps, method)
     )
     out = solve(batch, q0s)
     return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
