@@ -58,6 +58,7 @@ def main(
     repeats=None,
     tol=1e-7,
     budget_s=90.0,
+    name="",
 ):
     """Run the k-scaling study; return (rows, exponents)."""
     ks = ks or ((4, 8) if quick else KS)
@@ -125,7 +126,7 @@ def main(
                     "best": name == best,
                 }
             )
-    tag = "_quick" if quick else ""
+    tag = ("_quick" if quick else "") + (f"_{name}" if name else "")
     write_table(
         f"scaling_k{tag}",
         rows,
@@ -191,6 +192,7 @@ if __name__ == "__main__":
     p.add_argument("--ks", default="")
     p.add_argument("--solvers", default="")
     p.add_argument("--repeats", type=int, default=0)
+    p.add_argument("--name", default="", help="suffix of the result files")
     a = p.parse_args()
     main(
         quick=a.quick,
@@ -198,4 +200,5 @@ if __name__ == "__main__":
         ks=parse_list(a.ks, int),
         solvers=parse_list(a.solvers, str),
         repeats=a.repeats or None,
+        name=a.name,
     )

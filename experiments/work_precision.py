@@ -90,6 +90,7 @@ def main(
     repeats=None,
     ref_tol=1e-12,
     budget_s=60.0,
+    name="",
 ):
     """Run the work-precision study; return (rows, headline rows)."""
     k = 8 if quick else 40
@@ -146,7 +147,7 @@ def main(
                     )
                     if not r["ok"] or r["run_s"] > budget_s:
                         break  # tighter tolerances would only cost more
-    tag = "_quick" if quick else ""
+    tag = ("_quick" if quick else "") + (f"_{name}" if name else "")
     write_table(
         f"work_precision{tag}",
         rows,
@@ -281,6 +282,7 @@ if __name__ == "__main__":
     p.add_argument("--solvers", default="")
     p.add_argument("--peers", default="")
     p.add_argument("--repeats", type=int, default=0)
+    p.add_argument("--name", default="", help="suffix of the result files")
     a = p.parse_args()
     main(
         quick=a.quick,
@@ -290,4 +292,5 @@ if __name__ == "__main__":
         solvers=parse_list(a.solvers, str),
         peers=parse_list(a.peers, str),
         repeats=a.repeats or None,
+        name=a.name,
     )
