@@ -47,6 +47,7 @@ state is node-major with a narrow band and large enough, and a dense ``jacfwd`` 
 LU otherwise; ``"dense"`` and ``"banded"`` force one path.
 """
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -124,7 +125,11 @@ class StageNewton(optx.AbstractRootFinder):
       solver's `root_find_max_steps` to the same number.
     - `newton`: recompute the Jacobian at every iteration (for fixed-step methods).
     - `linear_solver`: `"auto"` (default), `"dense"` or `"banded"` (see the module
-      docstring).
+      docstring); or, for a state that stacks independent members along its leading
+      axis (`jaxstring.sweep(..., mode="lockstep")`), `"batched"`,
+      `"batched_dense"` or `"batched_banded"`: the Jacobian is block-diagonal
+      over the members and is built and factorised per member (see
+      `batched_factor`).
     - `refresh`: recompute the Jacobian at the current iterate when the iteration
       contracts slower than `refresh_rate`, at most `max_jacobians` Jacobians per
       solve (the initial one included).
@@ -143,6 +148,9 @@ class StageNewton(optx.AbstractRootFinder):
 
     def _factor(self, fn, y, args):
         noaux = _NoAux(fn)
+        if self.linear_solver in BATCHED_LINEAR_SOLVERS:
+            fac = batched_factor(noaux, y, args, self.linear_solver)
+            return lax.stop_gradient(fac)
         width = _linalg.choose_structure(noaux, y, args, self.linear_solver)
         jac = _linalg.jacobian(lambda u: noaux(u, args), y, width)
         fac = _linalg.factor(jac)
@@ -250,3 +258,90 @@ class StageNewton(optx.AbstractRootFinder):
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         return y, aux, {}
+
+
+# --------------------------------------------------------------------------------------
+# Block-diagonal (batched) linear algebra for stacked independent members
+
+BATCHED_LINEAR_SOLVERS = {
+    "batched": "auto",
+    "batched_dense": "dense",
+    "batched_banded": "banded",
+}
+
+
+class _Member(eqx.Module):
+    """Member 0 of a stacked residual, as a function of one member's unknowns.
+
+    All members are set to `u`; since members are independent, the result is
+    member 0's own residual at `u` (an `eqx.Module`, so that structure detection
+    can replace its array leaves by surrogates)."""
+
+    fn: Callable
+    shape: tuple = eqx.field(static=True)
+
+    def __call__(self, u, args):
+        return self.fn(jnp.broadcast_to(u, self.shape), args)[0]
+
+
+class BatchedDenseFactor(eqx.Module):
+    """LU factors of M independent dense blocks `(M, m, m)`."""
+
+    lu: Any
+    piv: Any
+
+    def solve(self, rhs):
+        M = rhs.shape[0]
+        x = jax.vmap(lambda lu, piv, b: jax.scipy.linalg.lu_solve((lu, piv), b))(
+            self.lu, self.piv, rhs.reshape(M, -1)
+        )
+        return x.reshape(rhs.shape)
+
+
+class BatchedBandedFactor(eqx.Module):
+    """Block cyclic reduction factors of M independent block-tridiagonal blocks."""
+
+    fac: Any  # _linalg.BandedFactor with a leading member axis on its arrays
+
+    def solve(self, rhs):
+        return jax.vmap(lambda f, r: f.solve(r))(self.fac, rhs)
+
+
+def batched_factor(fn, y, args, linear_solver: str = "batched"):
+    """Factorise the Jacobian of `fn(., args)` at `y`, for a `y` of shape
+    `(M, ...)` that stacks M independent members (member i of `fn` depends only on
+    member i of `y`): the Jacobian is block-diagonal, so it is never formed as an
+    `(M m) x (M m)` matrix.
+
+    Every JVP seeds the same direction in all members at once, so the members'
+    blocks cost as many JVPs of the stacked function as one member's Jacobian:
+    m (member size) for dense blocks, 3 w b for block-tridiagonal ones (the
+    structure of one member is chosen as `choose_structure` does for a single
+    solve: `linear_solver` "batched" = "auto", "batched_dense", "batched_banded").
+    The blocks are then factorised by a vmapped LU or block cyclic reduction.
+    """
+    inner = BATCHED_LINEAR_SOLVERS[linear_solver]
+    M = y.shape[0]
+    member = _Member(fn, tuple(y.shape))
+    width = _linalg.choose_structure(member, y[0], args, inner)
+    _, lin = jax.linearize(lambda u: fn(u, args), y)
+    if width is None:
+        m = math.prod(y.shape[1:])
+        seeds = jnp.eye(m, dtype=y.dtype).reshape((m,) + y.shape[1:])
+        cols = jax.vmap(lambda s: lin(jnp.broadcast_to(s, y.shape)))(seeds)
+        # cols[j, i] = column j of member i's block
+        blocks = jnp.moveaxis(cols.reshape(m, M, m), 0, -1)  # (M, rows, cols)
+        lu, piv = jax.vmap(jax.scipy.linalg.lu_factor)(blocks)
+        return BatchedDenseFactor(lu, piv)
+    # Banded: the per-member extraction of `block_tridiagonal_jacobian`, vmapped
+    # over the member index. `lin(broadcast(v))` does not depend on the index, so
+    # vmap evaluates it once for all members.
+    seed_lin = lambda v: lin(jnp.broadcast_to(v, y.shape))
+
+    def one(i):
+        mat = _linalg.block_tridiagonal_jacobian(
+            None, y[0], width, linear_fn=lambda v: seed_lin(v)[i]
+        )
+        return _linalg.factor(mat)
+
+    return BatchedBandedFactor(jax.vmap(one)(jnp.arange(M)))

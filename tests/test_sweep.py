@@ -1,17 +1,24 @@
 """sweep: one compiled vmap over members equals a Python loop of simulate calls;
-a failed member leaves the others intact; sharding over two CPU devices."""
+a failed member leaves the others intact; sharding over two CPU devices. The
+lockstep mode (one shared step sequence) agrees with a tight reference to the
+solver tolerance, as well as the loop does; its block-diagonal Newton linear algebra
+equals per-member dense solves."""
 
 import os
 import subprocess
 import sys
 import textwrap
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._sweep import sweep
+from jaxstring import _linalg
+from jaxstring._root_finder import batched_factor
+from jaxstring._sweep import member_rms_max, sweep
 
 
 def _end_and_tension(traj, scene):
@@ -94,3 +101,138 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert float(out.stdout.strip().splitlines()[-1]) < 1e-12
+
+
+def _pendulum(formulation="displacement", **kw):
+    return js.scenes.string_pendulum(formulation=formulation, k=3, t1=0.3, **kw)
+
+
+@pytest.mark.parametrize(
+    "formulation", ["displacement", pytest.param("natural", marks=pytest.mark.slow)]
+)
+def test_lockstep_as_accurate_as_the_loop_against_a_tight_reference(formulation):
+    # Members of different stiffness and damping take different step sequences
+    # alone; lockstep gives them one, accepted only when every member's own error
+    # norm passes. Each member must then be as accurate as its own solve (up to the
+    # randomness of error estimates: factor 3) -- measured against Kvaerno5 at
+    # rtol = atol = 1e-10 -- and within a tolerance-level distance of the loop.
+    # "natural" also checks the projection onto |t| = 1 of each member.
+    alphas = np.array([0.0, 0.01, 0.05])
+    EAs = np.array([1e3, 1e4, 1e5])
+    kw = dict(solver="kvaerno3", rtol=1e-6, atol=1e-6, n_save=11)
+    base = _pendulum(formulation, EA=1e3, alpha=0.01)
+    res = sweep(
+        base, {"alpha": alphas, "EA": EAs}, _end_and_tension, mode="lockstep", **kw
+    )
+    assert res.mode == "lockstep" and res.ok.all(), res.status
+    loop_err, lock_err, diff, steps = [], [], [], []
+    for i, (a, ea) in enumerate(zip(alphas, EAs)):
+        scene = _pendulum(formulation, EA=ea, alpha=a)
+        traj = js.simulate(scene, **kw)
+        ref = js.simulate(scene, solver="kvaerno5", rtol=1e-10, atol=1e-10, n_save=11)
+        steps.append(int(traj.stats["num_steps"]))
+        loop_err.append(np.max(np.abs(np.asarray(traj.end_mass - ref.end_mass))))
+        lock_err.append(np.max(np.abs(res.out["end"][i] - np.asarray(ref.end_mass))))
+        diff.append(np.max(np.abs(res.out["end"][i] - np.asarray(traj.end_mass))))
+    # The members' problems differ: their own step counts differ.
+    assert max(steps) > min(steps), steps
+    # The shared sequence is at least as fine as the hardest member needs.
+    assert int(res.stats["num_steps"][0]) >= 0.8 * max(steps)
+    assert max(lock_err) <= 3 * max(loop_err), (lock_err, loop_err)
+    assert max(lock_err) < 1e-4 and max(diff) < 1e-4  # 100 x rtol, 1 m string
+    # Not the same numbers as the loop (a different step sequence) ...
+    assert max(diff) > 1e-12
+    # ... and the tension agrees to the same relative level.
+    for i, (a, ea) in enumerate(zip(alphas, EAs)):
+        scene = _pendulum(formulation, EA=ea, alpha=a)
+        t_ref = float(jnp.max(js.simulate(scene, **kw).tension))
+        assert abs(res.out["T_max"][i] - t_ref) < 1e-3 * t_ref
+
+
+def test_lockstep_failure_falls_back_to_one_solve_per_member():
+    base = js.scenes.string_pendulum(
+        formulation="displacement", k=3, EA=1e3, alpha=0.02, t1=0.2
+    )
+    # Alone, the soft members need about 100 and 120 steps, the stiff one about
+    # 1150; the shared step sequence of all three about 210: with max_steps = 150
+    # the shared solve fails, and only the stiff member fails on its own.
+    EAs = np.array([1e3, 1e8, 2e3])
+    res = sweep(
+        base,
+        {"EA": EAs},
+        _end_and_tension,
+        devices=1,
+        max_steps=150,
+        mode="lockstep",
+        **KW,
+    )
+    assert res.mode == "lockstep, then vmap"
+    assert res.ok.tolist() == [True, False, True], res.status
+    for i in (0, 2):
+        scene = js.scenes.string_pendulum(
+            formulation="displacement", k=3, EA=EAs[i], alpha=0.02, t1=0.2
+        )
+        ref = js.simulate(scene, max_steps=150, **KW)
+        assert ref.ok
+        assert np.max(np.abs(res.out["end"][i] - np.asarray(ref.end_mass))) < 1e-10
+
+
+@pytest.mark.parametrize("linear_solver", ["batched_dense", "batched_banded"])
+def test_batched_factor_equals_per_member_dense_solves(linear_solver):
+    # A stacked residual of independent members, each a Newton matrix
+    # I - h J(member) of a string (node-major, block-tridiagonal Jacobian):
+    # the batched factor must solve every member's own dense system.
+    scenes = [
+        js.scenes.string_pendulum(k=k_, EA=ea, alpha=a)
+        for k_, ea, a in [(12, 1e4, 0.01), (12, 1e6, 0.0), (12, 1e5, 0.05)]
+    ]
+    rng = np.random.default_rng(0)
+    ys = jnp.stack([s.y0 + 0.01 * rng.standard_normal(s.y0.shape) for s in scenes])
+    h = 1e-3
+    eas = jnp.array([float(s.model.EA) for s in scenes])
+    al = jnp.array([float(s.effects[1].alpha) for s in scenes])
+    base = scenes[0]
+
+    def member_vf(y, ea, a):
+        sc = eqx.tree_at(lambda s: (s.model.EA, s.effects[1].alpha), base, (ea, a))
+        return sc.vector_field(0.0, y)
+
+    def residual(u, args):
+        eas, al = args
+        return u - h * jax.vmap(member_vf)(u, eas, al)
+
+    fac = jax.jit(lambda y, a: batched_factor(residual, y, a, linear_solver))(
+        ys, (eas, al)
+    )
+    rhs = jnp.asarray(rng.standard_normal(ys.shape))
+    x = fac.solve(rhs)
+    width = None if linear_solver == "batched_dense" else 1
+    for i in range(len(scenes)):
+        own = lambda u: residual(ys.at[i].set(u), (eas, al))[i]
+        J = np.asarray(jax.jacfwd(own)(ys[i])).reshape(ys[i].size, ys[i].size)
+        xi = np.asarray(x[i]).ravel()
+        b = np.asarray(rhs[i]).ravel()
+        # Backward stable: residual at rounding level of |J| |x|.
+        backward = np.max(np.abs(J @ xi - b)) / np.max(np.abs(J) @ np.abs(xi))
+        assert backward < 1e-14, backward
+        # Forward error: the single-member path of the same structure and a dense
+        # LU agree to the conditioning of J (I - h J of a stiff string).
+        bound = 1e-15 * np.linalg.cond(J) * np.max(np.abs(xi))
+        single = _linalg.factor(_linalg.jacobian(own, ys[i], width)).solve(rhs[i])
+        assert np.max(np.abs(np.asarray(single).ravel() - xi)) <= bound
+        assert np.max(np.abs(np.linalg.solve(J, b) - xi)) <= bound
+
+
+def test_member_rms_max_is_the_largest_member_rms():
+    x = jnp.array([[3.0, 4.0], [1.0, 1.0], [0.0, 0.0]])
+    assert float(member_rms_max(x)) == pytest.approx(np.sqrt(12.5), rel=1e-15)
+
+
+def test_lockstep_rejects_what_it_cannot_do():
+    base = _pendulum(EA=1e3, alpha=0.01)
+    with pytest.raises(ValueError, match="mode"):
+        sweep(base, {"alpha": [0.01]}, mode="fast")
+    with pytest.raises(ValueError, match="solver"):
+        sweep(base, {"alpha": [0.01]}, mode="lockstep", solver="rodas5p")
+    with pytest.raises(ValueError, match="time span"):
+        sweep(base, {"t1": [0.2, 0.3]}, mode="lockstep")
