@@ -201,15 +201,19 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
     ts = np.round(np.arange(0.0, t1 + 1e-9, 0.1), 10)
     repeats = repeats or (1 if quick else 3)
     tols = tols or ((1e-5,) if quick else (1e-4, 1e-6, 1e-8))
-    cfls = cfls or ((0.1,) if quick else (0.1, 0.5))
+    cfls = cfls or ((0.1,) if quick else (0.1, 0.2))
     have_md = importlib.util.find_spec("moordyn") is not None
     md = {}
     if have_md:
         for cfl in cfls:
-            runs = [
-                run_moordyn(ts, cfl, quick)
-                for _ in range(1 if quick else min(repeats, 2))
-            ]
+            try:
+                runs = [
+                    run_moordyn(ts, cfl, quick)
+                    for _ in range(1 if quick else min(repeats, 2))
+                ]
+            except RuntimeError as e:  # MoorDyn's RK4 diverges above its CFL limit
+                print(f"MoorDyn at cfl={cfl} failed: {e}")
+                continue
             md[cfl] = runs[0]
             md[cfl]["run_s"] = float(np.median([r["run_s"] for r in runs]))
             md[cfl]["repeats"] = len(runs)
@@ -244,7 +248,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
                 "x_end_m": r["end"][-1, 0],
             }
         )
-    names = solvers or ["kvaerno5"] + [n for n in ("kvaerno3",) if not quick]
+    names = solvers or ["kvaerno5"] + [n for n in ("bdf", "rodas5p") if not quick]
     for name in names:
         if name not in jaxstring.SOLVERS or not jaxstring.SOLVERS[name][1]:
             continue
@@ -267,6 +271,8 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
                 }
             )
             print(rows[-1], flush=True)
+            if not r["ok"] or r["run_s"] > 120.0:
+                break  # tighter tolerances would only cost more
     tag = "_quick" if quick else ""
     write_table(
         f"moordyn_pendulum{tag}",

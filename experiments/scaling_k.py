@@ -58,7 +58,7 @@ def main(
     repeats=None,
     tol=1e-7,
     budget_s=90.0,
-    name="",
+    out_name="",
 ):
     """Run the k-scaling study; return (rows, exponents)."""
     ks = ks or ((4, 8) if quick else KS)
@@ -126,7 +126,7 @@ def main(
                     "best": name == best,
                 }
             )
-    tag = ("_quick" if quick else "") + (f"_{name}" if name else "")
+    tag = ("_quick" if quick else "") + (f"_{out_name}" if out_name else "")
     write_table(
         f"scaling_k{tag}",
         rows,
@@ -200,5 +200,5 @@ if __name__ == "__main__":
         ks=parse_list(a.ks, int),
         solvers=parse_list(a.solvers, str),
         repeats=a.repeats or None,
-        name=a.name,
+        out_name=a.name,
     )

@@ -90,7 +90,7 @@ def main(
     repeats=None,
     ref_tol=1e-12,
     budget_s=60.0,
-    name="",
+    out_name="",
 ):
     """Run the work-precision study; return (rows, headline rows)."""
     k = 8 if quick else 40
@@ -147,7 +147,7 @@ def main(
                     )
                     if not r["ok"] or r["run_s"] > budget_s:
                         break  # tighter tolerances would only cost more
-    tag = ("_quick" if quick else "") + (f"_{name}" if name else "")
+    tag = ("_quick" if quick else "") + (f"_{out_name}" if out_name else "")
     write_table(
         f"work_precision{tag}",
         rows,
@@ -292,5 +292,5 @@ if __name__ == "__main__":
         solvers=parse_list(a.solvers, str),
         peers=parse_list(a.peers, str),
         repeats=a.repeats or None,
-        name=a.name,
+        out_name=a.name,
     )
