@@ -2,28 +2,31 @@
 
 ``ACCURACY_PRESETS[name]`` is a dict of keyword arguments for ``simulate``
 (``solver``, ``rtol``, ``atol``). The choice comes from
-``experiments/work_precision.py`` (results in ``experiments/results/``): for each
-accuracy level, the fastest measured (solver, tolerance) whose end-mass error reached
-it. Measured on the paper's pendulum, (eps, phi) variables, k = 40, l = 1 m,
-EA = 1e6 N, 2 s, on a shared 2-core AMD EPYC (load 6-9, so absolute times are about
-3x those of a quiet machine; the ratios between presets are what carry over).
-Error: the largest end-mass distance over 41 save times from CVODE at
-rtol = atol = 1e-12.
+``experiments/work_precision.py`` (``experiments/results/work_precision.md``): for
+each accuracy level, the fastest measured (solver, tolerance) whose end-mass error
+reached it. Measured on the paper's pendulum in (eps, phi) variables, k = 40,
+l = 1 m, EA = 1e6 N, 2 s, on a shared 2-core AMD EPYC (load 6-14, so absolute times
+are several times those of a quiet machine; the ratios are what carry over). Error:
+the largest end-mass distance over 41 save times from CVODE at rtol = atol = 1e-12.
+CVODE (BDF, band Jacobian from JAX) needed 1.1 s, 1.6 s and 3.9 s for errors of
+1e-3, 1e-5 and 1e-7 m in the same run.
 
-* ``"draft"``: Kvaerno5, rtol = atol = 1e-3 -- end-mass error 3.5e-4 m (3.5e-4 of
-  the string length), 1.5 s. Kvaerno3 at 1e-3 was more accurate (1.2e-4 m) but
-  twice as slow (3.0 s).
-* ``"balanced"``: Kvaerno5, rtol = atol = 1e-5 -- error 4.6e-6 m, 5.7 s
-  (1e-7 gives 2.6e-7 m in 7.7 s). Kvaerno3 at 1e-5: 4.9e-7 m in 19 s.
-* ``"precise"``: Kvaerno5, rtol = atol = 1e-9 -- error 9.5e-9 m, 24 s.
+* ``"draft"``: Rodas5P, rtol = atol = 1e-3 -- end-mass error 1.5e-4 m, 0.25 s
+  (Kvaerno5 at 1e-3: 3.0e-4 m, 0.35 s).
+* ``"balanced"``: Rodas5P, rtol = atol = 1e-5 -- error 2.0e-6 m, 0.53 s
+  (Kvaerno5: 1.7e-6 m, 0.97 s).
+* ``"precise"``: Rodas5P, rtol = atol = 1e-9 -- error 3.2e-10 m, 3.7 s
+  (Kvaerno5: 9.5e-9 m, 2.5 s).
 
-Kvaerno5 was the fastest jaxstring solver at every accuracy level measured; on
-this problem size CVODE (BDF, band Jacobian from JAX) reached the same accuracy
-faster (see ``experiments/results/work_precision_headline.md``).
+At EA = 1e9 in (eps, phi) the same settings give 1.3e-4, 1.5e-6 and 1.1e-10 m in
+0.39, 0.86 and 4.3 s. In displacement variables Rosenbrock methods lose accuracy on
+the stiff geometric nonlinearity (Rodas5P at rtol 1e-3, EA = 1e9: 1.5e-2 m in 45 s);
+there pass ``solver="bdf"`` instead of a preset (EA = 1e6, rtol 1e-7: 2.2e-6 m in
+0.47 s, 0.17x CVODE's time for the same error).
 """
 
 ACCURACY_PRESETS = {
-    "draft": {"solver": "kvaerno5", "rtol": 1e-3, "atol": 1e-3},
-    "balanced": {"solver": "kvaerno5", "rtol": 1e-5, "atol": 1e-5},
-    "precise": {"solver": "kvaerno5", "rtol": 1e-9, "atol": 1e-9},
+    "draft": {"solver": "rodas5p", "rtol": 1e-3, "atol": 1e-3},
+    "balanced": {"solver": "rodas5p", "rtol": 1e-5, "atol": 1e-5},
+    "precise": {"solver": "rodas5p", "rtol": 1e-9, "atol": 1e-9},
 }
