@@ -53,7 +53,8 @@ aj = jnp.asarray(a)
 lu = jax.jit(jax.scipy.linalg.lu_factor)
 try:
     from threadpoolctl import threadpool_info
-    th = max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=-1)
+    pools = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    th = max(pools, default=-1)
 except ImportError:
     th = -1
 print(json.dumps({
@@ -120,7 +121,8 @@ def main(quick=False):
         f"{N} x {N} LU factorisation vs OpenBLAS threads (median of {reps})",
         notes=[
             "Each row is its own process (OpenBLAS reads its thread count on load).",
-            "blas_threads_live: OpenBLAS pool size seen by threadpoolctl (-1: not installed).",
+            "blas_threads_live: OpenBLAS pool size seen by threadpoolctl "
+            "(-1: not installed).",
             "x_vs_1thread: time / the threads=1 row, same run.",
         ],
     )
