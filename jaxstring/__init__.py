@@ -50,6 +50,13 @@ from ._string import (
     NaturalTangentString as NaturalTangentString,
 )
 from ._sweep import SweepResult as SweepResult, sweep as sweep
+from ._tandem_line import (
+    TandemLine as TandemLine,
+    hawser_line as hawser_line,
+    line_equilibrium as line_equilibrium,
+    static_line as static_line,
+    with_line as with_line,
+)
 from ._tanker_analysis import (
     controlled_metrics as controlled_metrics,
     find_equilibria as find_equilibria,

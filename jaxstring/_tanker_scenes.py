@@ -11,6 +11,7 @@ import jax.numpy as jnp
 
 from ._control import ComputedForcePD, NonlinearCompensator
 from ._scene import Scene
+from ._tandem_line import HAWSER_KINDS, with_line
 from ._validate import check_choice, check_finite, check_nonnegative, check_positive
 from ._vessel import (
     AbstractVesselLoad,
@@ -160,18 +161,44 @@ def tandem_equilibria(
     return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-equilibria")
 
 
+def _hawser_kind(scene, hawser, line_options):
+    check_choice("hawser", hawser, HAWSER_KINDS)
+    if hawser == "massless":
+        if line_options:
+            raise ValueError(
+                "`line_options` apply only with hawser='line'; got "
+                f"{sorted(line_options)}."
+            )
+        return scene
+    return with_line(scene, name=scene.name, **(line_options or {}))
+
+
 def tandem_fishtail(
-    F_ast=0.0, perturbation_deg=2.5, t1=60000.0, U_c=1.0, l0=80.0, k_h=2.0e5
+    F_ast=0.0,
+    perturbation_deg=2.5,
+    t1=60000.0,
+    U_c=1.0,
+    l0=80.0,
+    k_h=2.0e5,
+    hawser="massless",
+    line_options=None,
 ) -> Scene:
     """S3a: current only, constant astern pull `F_ast` (N), from the aligned
-    equilibrium with the shuttle turned by `perturbation_deg` about its bow."""
+    equilibrium with the shuttle turned by `perturbation_deg` about its bow.
+
+    `hawser="line"` replaces the massless hawser by a line with mass and drag
+    (`with_line`; `line_options`: its keyword arguments, e.g. `N`,
+    `mass_per_length`); the vessels start from the same state (the perturbation
+    turns the shuttle about its fairlead, so the line's static shape is that of
+    the massless equilibrium's span)."""
     check_finite("perturbation_deg", perturbation_deg)
     check_positive("U_c", U_c, "m/s")
     model = tandem_model()
     eff = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
     y0 = aligned_equilibrium(model, eff, F_ast=F_ast)
     y0 = _perturb_shuttle_heading(model, y0, math.radians(perturbation_deg))
-    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail")
+    sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail")
+    return _hawser_kind(sc, hawser, line_options)
 
 
 def tandem_hopf(F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0) -> Scene:
@@ -207,13 +234,16 @@ def tandem_controlled(
     X_max=1.5e6,
     N_max=1.0e8,
     U_c=1.0,
+    hawser="massless",
+    line_options=None,
 ) -> Scene:
     """S4: the shuttle under the nonlinear compensator (law "B") or the computed
     force PD (law "A"), in one of `ENVIRONMENTS`.
 
     The span reference is d_ref = l0 + delta(T_ref) (81.47 m at 300 kN); the
     heading reference is the hawser bearing. Gains: K_P = omega^2, K_D = 2 zeta
-    omega on both channels."""
+    omega on both channels. `hawser="line"`: as in `tandem_fishtail` (the
+    controller keeps the massless hawser as its model of the line)."""
     check_choice("env", env, tuple(ENVIRONMENTS))
     check_choice("law", law, ("A", "B"))
     check_positive("T_ref", T_ref, "N")
@@ -221,17 +251,19 @@ def tandem_controlled(
     check_positive("zeta", zeta)
     check_positive("span0", span0, "m")
     V_w, Dw = ENVIRONMENTS[env]
+    check_choice("hawser", hawser, HAWSER_KINDS)
     model = tandem_model()
-    hawser = Hawser()
-    d_ref = hawser.l0 + hawser.stretch_for_tension(T_ref)
+    spec_hawser = Hawser()
+    d_ref = spec_hawser.l0 + spec_hawser.stretch_for_tension(T_ref)
     cls = NonlinearCompensator if law == "B" else ComputedForcePD
     ctl = cls.from_bandwidth(
         omega=omega, zeta=zeta, d_ref=d_ref, X_max=X_max, N_max=N_max
     )
     eff = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw) + (
-        hawser,
+        spec_hawser,
         TurretMooring(),
         ctl,
     )
     y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
-    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled")
+    sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled")
+    return _hawser_kind(sc, hawser, line_options)

@@ -652,13 +652,16 @@ def vessel_loads(model, t, y, effects):
     return tau
 
 
-def _rhs(model, t, y, effects, u):
-    """dX/dt with the shuttle input `u` = (X_ctl, N_ctl) (None: no actuator)."""
+def _rhs(model, t, y, effects, u, extra=None):
+    """dX/dt with the shuttle input `u` = (X_ctl, N_ctl) (None: no actuator) and
+    `extra` body-axis loads `(n_vessels, 3)` (None: none)."""
     n = model.n_vessels
     s = y.reshape(n, 6)
     eta, nu = s[:, :3], s[:, 3:]
     vc = current_velocity(effects)
     tau = vessel_loads(model, t, y, effects)
+    if extra is not None:
+        tau = tau + extra
     if u is not None:
         _require_tandem(model, "actuator")
         tau = tau.at[-1, 0].add(u[0]).at[-1, 2].add(u[1])

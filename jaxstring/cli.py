@@ -223,6 +223,13 @@ def build_parser() -> argparse.ArgumentParser:
         sp = scene_parsers.add_parser(name, help=f"FPSO + shuttle tandem ({name})")
         sp.add_argument("--quick", action="store_true", help="shorter runs")
         sp.add_argument("--out", default="out", help="output directory")
+        sp.add_argument(
+            "--hawser",
+            choices=("massless", "line"),
+            default="massless",
+            help="massless hawser (spec) or a line with mass and drag "
+            "(tandem-fishtail, tandem-controlled)",
+        )
     return parser
 
 
@@ -383,7 +390,7 @@ def main(argv=None) -> int:
         from .tanker_cli import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:
-            return run_tanker(args.scene, args.out, args.quick)
+            return run_tanker(args.scene, args.out, args.quick, args.hawser)
         return _run_scene(args)
     parser.error(f"unknown command {args.command!r}")  # pragma: no cover
     return 2  # pragma: no cover

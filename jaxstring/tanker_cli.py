@@ -5,9 +5,12 @@ one-screen summary and writes figures (PNG) and a small CSV into `out_dir`.
 Returns an exit code: 0 when every check of the spec the run can make passes,
 1 otherwise (the numbers are still printed and written).
 
-All simulations use `tsit5` (explicit, adaptive): the tandem is not stiff (the
-fastest mode is the hawser-surge mode at 0.042 rad/s), and an implicit solver
-takes as many steps at ~8x the cost per step (see experiments/tanker_*.py).
+All simulations with the massless hawser use `tsit5` (explicit, adaptive): the
+tandem is not stiff (the fastest mode is the hawser-surge mode at 0.042 rad/s),
+and an implicit solver takes as many steps at ~8x the cost per step (see
+experiments/tanker_*.py). With `--hawser line` (fishtail and controlled scenes)
+the hawser is a line with mass and drag (`with_line`), whose axial mode at
+~120 rad/s calls for an implicit solver: `rodas5p` at rtol = atol = 1e-7.
 """
 
 import math
@@ -25,18 +28,36 @@ TANKER_SCENES = (
 
 SOLVER = "tsit5"
 TOL = 1e-8
+LINE_SOLVER = "rodas5p"
+LINE_TOL = 1e-7
+# the scenes that take `--hawser line`
+LINE_SCENES = ("tandem-fishtail", "tandem-controlled")
 
 
-def _sim(scene, n_save, max_steps=1_000_000):
+def _solver_of(scene):
+    from ._tandem_line import TandemLine
+
+    if isinstance(scene.model, TandemLine):
+        return LINE_SOLVER, LINE_TOL
+    return SOLVER, TOL
+
+
+def _tandem(model):
+    """The vessels' model (a TandemLine's `tandem`) for the plots."""
+    return getattr(model, "tandem", model)
+
+
+def _sim(scene, n_save, max_steps=2_000_000):
     import jax
     import jax.numpy as jnp
 
     from ._simulate import simulate
 
+    solver, tol = _solver_of(scene)
     ts = jnp.linspace(float(scene.t0), float(scene.t1), n_save)
     start = time.perf_counter()
     traj = jax.block_until_ready(
-        simulate(scene, SOLVER, rtol=TOL, atol=TOL, ts=ts, max_steps=max_steps)
+        simulate(scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=max_steps)
     )
     return traj, time.perf_counter() - start
 
@@ -201,23 +222,25 @@ def _equilibria(out_dir, quick):
     return lines, ok
 
 
-def _fishtail(out_dir, quick):
+def _fishtail(out_dir, quick, hawser="massless"):
     from . import tanker_plot as tp
     from ._tanker_analysis import measure_limit_cycle
     from ._tanker_scenes import tandem_fishtail
 
     t1 = 30000.0 if quick else 60000.0
-    sc = tandem_fishtail(t1=t1)
+    sc = tandem_fishtail(t1=t1, hawser=hawser)
     traj, wall = _sim(sc, int(t1 / 10) + 1)
     m = measure_limit_cycle(traj, 0.6 * t1)
+    solver = _solver_of(sc)[0]
     tp.tandem_figure(
         traj,
-        sc.model,
+        _tandem(sc.model),
         os.path.join(out_dir, "tandem_fishtail.png"),
-        title=f"S3a fishtailing, current 1 m/s, F_ast = 0 [{SOLVER}, {traj.status}]",
+        title=f"S3a fishtailing, current 1 m/s, F_ast = 0, {hawser} hawser "
+        f"[{solver}, {traj.status}]",
     )
     lines = [
-        f"S3a fishtailing, {t1:.0f} s ({traj.status}, "
+        f"S3a fishtailing, {hawser} hawser, {t1:.0f} s ({traj.status}, "
         f"{int(traj.stats['num_steps'])} steps, {wall:.1f} s incl. compile)",
         f"  measured over t > {0.6 * t1:.0f} s ({m['n_cycles']} cycles)",
     ]
@@ -235,6 +258,11 @@ def _fishtail(out_dir, quick):
     _write_csv(
         os.path.join(out_dir, "tandem_fishtail.csv"), list(m), [tuple(m.values())]
     )
+    if hawser == "line":
+        # The spec's ranges are for the massless hawser: the line's mass and drag
+        # shorten the cycle (experiments/results/tanker_line.md); check the run.
+        lines.append("  (spec ranges: massless hawser; the line changes the cycle)")
+        return lines, traj.ok
     ok = (
         3300 <= m["period"] <= 3600
         and 13 <= m["shuttle_yaw"] <= 18
@@ -298,21 +326,22 @@ def _hopf(out_dir, quick):
     return lines, abs(F_star - 43e3) <= 4.3e3
 
 
-def _controlled(out_dir, quick):
+def _controlled(out_dir, quick, hawser="massless"):
     from . import tanker_plot as tp
     from ._tanker_analysis import controlled_metrics
     from ._tanker_scenes import ENVIRONMENTS, tandem_controlled
 
     t1 = 4000.0 if quick else 6000.0
     lines = [
-        f"S4  law B (nonlinear compensator), {t1:.0f} s; acceptance after 3000 s",
+        f"S4  law B (nonlinear compensator), {hawser} hawser, {t1:.0f} s; "
+        "acceptance after 3000 s",
         "  env          |d-dref| m  |y2| deg  d_min m  clear m  |X|max kN  "
         "|N|max  psi1_end  X_end kN  ok",
     ]
     rows, ok = [], True
     for env in ENVIRONMENTS:
-        sc = tandem_controlled(env=env, t1=t1)
-        ctl = sc.effects[-1]
+        sc = tandem_controlled(env=env, t1=t1, hawser=hawser)
+        ctl = [e for e in sc.effects if hasattr(e, "d_ref")][0]
         traj, wall = _sim(sc, int(t1 / 2) + 1)
         m = controlled_metrics(traj, float(ctl.d_ref), ctl.X_max, ctl.N_max)
         lines.append(
@@ -344,9 +373,10 @@ def _controlled(out_dir, quick):
         ok &= m["ok"]
         tp.tandem_figure(
             traj,
-            sc.model,
+            _tandem(sc.model),
             os.path.join(out_dir, f"tandem_controlled_{env}.png"),
-            title=f"S4 law B, {env} [{SOLVER}, {traj.status}]",
+            title=f"S4 law B, {env}, {hawser} hawser "
+            f"[{_solver_of(sc)[0]}, {traj.status}]",
             d_ref=float(ctl.d_ref),
         )
     lines.append("  [spec: final psi1 0 / 44.6 / 62.5 deg; X_end -270 to -390 kN]")
@@ -379,10 +409,11 @@ RUNNERS = {
 }
 
 
-def run_tanker(name: str, out_dir: str, quick: bool) -> int:
+def run_tanker(name: str, out_dir: str, quick: bool, hawser: str = "massless") -> int:
     """Run the study of one tandem scene (S0-S4), print a one-screen summary and
-    write figures and a CSV into `out_dir`. Returns 0 when the spec checks pass,
-    1 when one fails, 2 on an unknown name."""
+    write figures and a CSV into `out_dir`. `hawser`: "massless" (the spec's) or
+    "line" (mass and drag; the fishtail and controlled scenes). Returns 0 when the
+    spec checks pass, 1 when one fails, 2 on an unknown name or option."""
     import sys
 
     if name not in RUNNERS:
@@ -391,9 +422,21 @@ def run_tanker(name: str, out_dir: str, quick: bool) -> int:
             file=sys.stderr,
         )
         return 2
+    if hawser not in ("massless", "line") or (
+        hawser == "line" and name not in LINE_SCENES
+    ):
+        print(
+            f"error: --hawser {hawser!r} for {name}: valid is 'massless', or 'line' "
+            f"for {', '.join(LINE_SCENES)}",
+            file=sys.stderr,
+        )
+        return 2
     os.makedirs(out_dir, exist_ok=True)
     start = time.perf_counter()
-    lines, ok = RUNNERS[name](out_dir, quick)
+    if name in LINE_SCENES:
+        lines, ok = RUNNERS[name](out_dir, quick, hawser)
+    else:
+        lines, ok = RUNNERS[name](out_dir, quick)
     lines.insert(0, f"jaxstring run {name}{' (quick)' if quick else ''}")
     lines.append(f"wall time {time.perf_counter() - start:.1f} s; outputs in {out_dir}")
     lines.append("checks: " + ("pass" if ok else "FAIL"))
