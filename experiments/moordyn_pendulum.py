@@ -248,7 +248,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
                 "x_end_m": r["end"][-1, 0],
             }
         )
-    names = solvers or ["kvaerno5"] + [n for n in ("bdf", "rodas5p") if not quick]
+    names = solvers or ["kvaerno5", "bdf"] + [n for n in ("rodas5p",) if not quick]
     for name in names:
         if name not in jaxstring.SOLVERS or not jaxstring.SOLVERS[name][1]:
             continue

@@ -215,3 +215,71 @@ def test_bad_arguments_raise():
         BDF(max_order=6)
     with pytest.raises(ValueError, match="linear_solver"):
         BDF(linear_solver="sparse")
+
+
+# ---------------------------------------------------------------------------
+# Stability guard: MoorDyn's test-suite pendulum (issue 4)
+# ---------------------------------------------------------------------------
+
+
+class _EndWeight(js.AbstractLoad):
+    """The end mass's weight only (a neutrally buoyant line)."""
+
+    weight: jnp.ndarray = eqx.field(converter=jnp.asarray)
+
+    def loads(self, t, kin, model):
+        del t
+        end = jnp.zeros((kin.positions.shape[-1],)).at[1].set(-self.weight)
+        return js.Loads(line=jnp.zeros_like(kin.positions), end=end)
+
+    def potential(self, y, kin, model):
+        return model.constant_load_potential(y, self.loads(0.0, kin, model))
+
+
+def _moordyn_pendulum(k=10, t1=20.0):
+    # experiments/moordyn_pendulum.py with k = 10: 100.5 m, EA = 1e9 N, 7.85 kg/m,
+    # 1e5 kg end mass released from (10, -100) m, 1 % segment damping, the line
+    # straight and stretched under the weight's radial part. Its axial modes are
+    # lightly damped (zeta ~ 0.01) and its transverse modes undamped: eigenvalues
+    # within 0.6 degrees of the imaginary axis.
+    l, EA, w, m, g = 100.5, 1e9, 7.85398, 1e5, 9.81
+    alpha = 0.01 * (l / k) * np.sqrt(EA * w) / EA
+    d = np.hypot(10.0, 100.0)
+    stretch = 1.0 + m * g * (100.0 / d) / EA
+    r = (
+        np.linspace(0, 1, k + 1)[1:, None]
+        * np.array([[10.0, -100.0]])
+        * (l * stretch / d)
+    )
+    y0 = np.concatenate([r, np.zeros_like(r)], axis=1)
+    return js.scenes.string_pendulum(
+        k=k,
+        EA=EA,
+        alpha=alpha,
+        l=l,
+        mu=w,
+        m_s=m,
+        t1=t1,
+        effects=(_EndWeight(weight=m * g), js.KelvinVoigt(alpha=alpha)),
+        y0=jnp.asarray(y0),
+    )
+
+
+def test_moordyn_pendulum_stability_guard():
+    # Orders 3-5 are unstable for h omega in a band on the imaginary axis (NDF3:
+    # 0.01 < h omega < 3.4, NDF5: 0.7 ... 9.3). Without the guard the step collapsed
+    # to ~1e-4 s at orders 3-4 and bdf hit max_steps (here 20k steps by t = 20 s,
+    # at both tolerances); Rodas5P needs 201 / 929 steps. With it bdf finishes in
+    # 719 / 7499 steps with end-mass errors 1.0e-3 m (rtol 1e-4) and 6.9e-6 m
+    # (rtol 1e-6) against Rodas5P at 1e-10 (positions ~100 m: relative 1e-5, 7e-8).
+    scene = _moordyn_pendulum()
+    ts = jnp.linspace(0.0, 20.0, 101)
+    ref = js.simulate(
+        scene, "rodas5p", rtol=1e-10, atol=1e-10, ts=ts, max_steps=200_000
+    )
+    assert ref.ok
+    for tol, bound in ((1e-4, 5e-3), (1e-6, 5e-5)):
+        traj = js.simulate(scene, "bdf", rtol=tol, atol=tol, ts=ts, max_steps=20_000)
+        assert traj.ok, (tol, traj.status, traj.stats)
+        err = float(jnp.max(jnp.linalg.norm(traj.end_mass - ref.end_mass, axis=-1)))
+        assert err < bound, (tol, err)
