@@ -54,12 +54,22 @@ from jaxstring import _linalg
 from jaxstring._root_finder import StageNewton
 
 
-ADAPTIVE = ("rodas5p", "kvaerno3", "kvaerno5", "kvaerno5-newton", "implicit_euler")
+ADAPTIVE = (
+    "rodas5p",
+    "bdf",
+    "kvaerno3",
+    "kvaerno5",
+    "kvaerno5-pid",
+    "kvaerno5-newton",
+    "implicit_euler",
+)
 FIXED = ("theta", "newmark", "implicit_euler_fixed")
 
 
 def _solver(name, rtol, atol):
     """A name simulate knows, or a variant built here."""
+    if name.endswith("-pid"):
+        return name[: -len("-pid")]
     if name == "kvaerno5-newton":
         rf = StageNewton(rtol=rtol, atol=atol, max_iters=10, newton=True)
         return dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
@@ -71,6 +81,9 @@ def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
     kw = dict(rtol=rtol, atol=atol, ts=ts, max_steps=max_steps)
     if name in FIXED:
         kw["dt0"] = 0.005
+    if name.endswith("-pid"):
+        # diffrax's plain PIDController (before NewtonLimitedController)
+        kw["step_control"] = "pid"
     row = {"solver": name}
     try:
         tm, traj = timed(lambda: js.simulate(scene, solver, **kw), repeats)
@@ -246,6 +259,9 @@ def main(
         "in the same run.",
         "kvaerno5-newton: Kvaerno5 with StageNewton(newton=True) (fresh banded "
         "Jacobian at every iteration).",
+        "NAME-pid: the solver with diffrax's plain PIDController "
+        "(`step_control='pid'`); without the suffix the Kvaerno/implicit-Euler "
+        "solvers use NewtonLimitedController (jaxstring/_controller.py).",
     ]
     if not have_cvode:
         notes.append("CVODE not measured: scikit-sundae is not installed here.")

@@ -9,6 +9,7 @@ from ._control import (
     ComputedForcePD as ComputedForcePD,
     NonlinearCompensator as NonlinearCompensator,
 )
+from ._controller import NewtonLimitedController as NewtonLimitedController
 from ._effects import (
     AbstractEffect as AbstractEffect,
     AbstractLoad as AbstractLoad,

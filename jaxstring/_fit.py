@@ -31,6 +31,7 @@ import jax.tree_util as jtu
 import numpy as np
 import optax
 
+from ._controller import make_controller
 from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
 from ._simulate import _solve, observables
@@ -200,9 +201,7 @@ def _solve_adjoint(
         saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))
     else:
         saveat = dfx.SaveAt(ts=ts)
-    controller = (
-        dfx.PIDController(rtol=rtol, atol=atol) if adaptive else dfx.ConstantStepSize()
-    )
+    controller = make_controller(solver, rtol, atol, adaptive)
     sol = dfx.diffeqsolve(
         dfx.ODETerm(scene_vector_field),
         dfx_solver,

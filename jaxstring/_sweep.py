@@ -39,6 +39,23 @@ experiments/sweep_speed.py):
   a `simulate` call by about the tolerance, not by rounding). A failure of any
   member stops the shared solve; `fallback=True` then re-runs the members one solve
   each (vmap mode), so that each gets its own status.
+* lockstep with a fixed step (`solver` "implicit_euler_fixed", "theta",
+  "trapezoid"): every member takes the same steps as its own `simulate` call, so
+  the group differs from the loop only by how far each step's (full, quadratically
+  convergent) Newton iteration is converged: with `newton_rtol = newton_atol =
+  1e-10`, to rounding. The members' node-major states are concatenated along the
+  node axis (`_FlatBatch`): member blocks never couple, so the Jacobian of the
+  group is block-tridiagonal like one long string's, and the fixed-step solver's
+  own banded path (colouring JVPs, block cyclic reduction) serves the whole group.
+
+Where the time goes (string pendulum, k = 20, `experiments/sweep_speed.py`,
+`sweep_speed_profile.md`): a step of a single solve costs ~100-160 us of CPU, of
+which the implicit-step arithmetic (vector field, 12 JVPs, banded Jacobian and
+factorisation ~17 us, solves) is a minor part; the rest is per-iteration overhead
+of the solver loops, which a lockstep group shares between its members. The
+factorisation's cost *per member* grows with the group (about 12 us at 4 members,
+20-25 us at 16, 45 us at 64: memory traffic of the unfused small-block
+operations), which is why groups of 2 to 4 are fastest.
 """
 
 import math
@@ -53,7 +70,9 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ._controller import make_controller
 from ._fit import SolveConfig, resolve, solve
+from ._fixed_step import ThetaMethod
 from ._projection import ProjectedSolver
 from ._root_finder import StageNewton
 from ._scene import Scene
@@ -190,8 +209,43 @@ def _batch_vector_field(t, y, batch):
     return batch.vector_field(t, y)
 
 
+class _FlatBatch(eqx.Module):
+    """The members of a fixed-step lockstep sweep with their node-major states
+    `(n_nodes, b)` concatenated along the node axis: one state `(M n_nodes, b)`.
+    Member blocks never couple, so the Jacobian of the stacked vector field is
+    block-tridiagonal like a single string's (zero blocks between members) and the
+    fixed-step solvers' own banded path (colouring JVPs, block cyclic reduction
+    over all M n_nodes nodes) handles the batch with no batched code."""
+
+    batch: _Batch
+    shape: tuple = eqx.field(static=True)  # (M, n_nodes, b)
+
+    def vector_field(self, t, y):
+        return self.batch.vector_field(t, y.reshape(self.shape)).reshape(y.shape)
+
+    @property
+    def model(self):
+        return self
+
+    def project(self, y):
+        return self.batch.project(y.reshape(self.shape)).reshape(y.shape)
+
+
+# Fixed-step solvers (damped full Newton, `jaxstring._fixed_step`) by name -> theta.
+LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
+
+
 def _lockstep_solver(config):
-    cls = LOCKSTEP_SOLVERS[config.solver]
+    name = config.solver
+    if name in LOCKSTEP_FIXED:
+        nr = config.rtol if config.newton_rtol is None else config.newton_rtol
+        na = config.atol if config.newton_atol is None else config.newton_atol
+        return ThetaMethod(
+            theta=LOCKSTEP_FIXED[name],
+            rtol=jnp.asarray(nr, dtype=jnp.float64),
+            atol=jnp.asarray(na, dtype=jnp.float64),
+        )
+    cls = LOCKSTEP_SOLVERS[name]
     if cls in (dfx.Tsit5, dfx.Dopri5):
         return cls()
     nr = config.rtol if config.newton_rtol is None else config.newton_rtol
@@ -238,6 +292,17 @@ def _lockstep(vals, scene, getters, fn, config, ts):
     n = vals[0].shape[0]
     y0 = jnp.broadcast_to(scene.y0, (n,) + jnp.shape(scene.y0))
     solver = _lockstep_solver(config)
+    fixed = False
+    dt0 = config.dt0
+    args = batch
+    flat = config.solver in LOCKSTEP_FIXED
+    if flat:
+        # Node-major member states concatenated along the node axis (see
+        # `_FlatBatch`); default step as in `simulate`.
+        fixed = True
+        dt0 = 0.005 if dt0 is None else dt0
+        args = _FlatBatch(batch, tuple(y0.shape))
+        y0 = y0.reshape((-1,) + y0.shape[2:])
     if config.project and scene.model.projects:
         solver = ProjectedSolver(solver)
         saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.project(y))
@@ -249,12 +314,18 @@ def _lockstep(vals, scene, getters, fn, config, ts):
         solver,
         t0=scene.t0,
         t1=scene.t1,
-        dt0=None if config.dt0 is None else f64(config.dt0),
+        dt0=None if dt0 is None else f64(dt0),
         y0=y0,
-        args=batch,
+        args=args,
         saveat=saveat,
-        stepsize_controller=dfx.PIDController(
-            rtol=f64(config.rtol), atol=f64(config.atol), norm=member_rms_max
+        # the controller `simulate` uses for this solver (NewtonLimitedController
+        # for the Kvaerno family), on the member-wise max norm
+        stepsize_controller=make_controller(
+            config.solver,
+            f64(config.rtol),
+            f64(config.atol),
+            not fixed,
+            norm=member_rms_max,
         ),
         max_steps=config.max_steps,
         throw=False,
@@ -287,7 +358,10 @@ def _lockstep(vals, scene, getters, fn, config, ts):
         )
         return fn(traj, sc)
 
-    out = jax.vmap(post)(vals, jnp.swapaxes(sol.ys, 0, 1))
+    ys_all = sol.ys
+    if flat:
+        ys_all = ys_all.reshape((ys_all.shape[0], n) + jnp.shape(scene.y0))
+    out = jax.vmap(post)(vals, jnp.swapaxes(ys_all, 0, 1))
     codes = jnp.broadcast_to(sol.result._value, (n,))
     return out, codes, stats
 
@@ -322,6 +396,8 @@ def sweep(
     ts=None,
     n_save: int = 201,
     dt0=None,
+    newton_rtol: float | None = None,
+    newton_atol: float | None = None,
     max_steps: int = 200_000,
     project: bool = True,
     devices="auto",
@@ -343,9 +419,9 @@ def sweep(
     - `fn`: `fn(traj, scene) -> pytree of arrays` evaluated on each member's
       `Trajectory` inside the compiled call (e.g. a period, the maximum tension);
       default: all observables `traj.obs`.
-    - `solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `max_steps`, `project`: as for
-      `jaxstring.simulate`; `ts` is shared by all members (default: `n_save` points
-      over the base scene's span).
+    - `solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `newton_rtol`, `newton_atol`,
+      `max_steps`, `project`: as for `jaxstring.simulate`; `ts` is shared by all
+      members (default: `n_save` points over the base scene's span).
     - `devices`: `"auto"` (all devices of the default backend), a list of devices, or
       1 / None (no sharding). Members are padded to a multiple of the device count.
     - `batch_size`: run members in groups of this size (vmap inside `lax.map`);
@@ -362,14 +438,17 @@ def sweep(
       (see `experiments/sweep_speed.py`); each member is then at least as
       accurate as its own solve, but not bitwise equal to it (differences of the
       order of the tolerance). Supports `solver` "kvaerno3/4/5",
-      "implicit_euler", "tsit5", "dopri5"; not for sweeping `t0`/`t1`.
-      With lockstep, small groups (`batch_size` 4 to 8, `order="sort"`) were the
+      "implicit_euler", "tsit5", "dopri5"; and the fixed-step "implicit_euler_fixed",
+      "theta", "trapezoid" for node-major states (every member then takes its own
+      solve's steps: with `newton_rtol = newton_atol = 1e-10` the members equal
+      their `simulate` calls to rounding); not for sweeping `t0`/`t1`.
+      With lockstep, small groups (`batch_size` 4, `order="sort"`) were the
       fastest in `experiments/sweep_speed.py` (string pendulum, k = 20, 64
-      members: CPU time 2.7x (groups of 4) and 2.1x (8) below a loop of
-      `simulate` calls, against 1.5x for groups of 16 and 0.8x for one group
-      of 64: the per-member cost of the batched Jacobian and factorisation
-      grows with the group, and a shared step sequence is set by its hardest
-      member).
+      members, Kvaerno3 at 1e-6, a loaded 2-core machine: 1.9-2.8x below a loop
+      of `simulate` calls in CPU time; groups of 16 1.5x, one group of 64 0.8x:
+      the per-member cost of the batched Jacobian and factorisation grows with
+      the group, and a shared step sequence is set by its hardest member). The
+      fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
       its own status and the others are intact (`SweepResult.mode` says so).
@@ -402,11 +481,18 @@ def sweep(
                 "lockstep sweep share; use mode='vmap'."
             )
     if mode == "lockstep" and not (
-        isinstance(solver, str) and solver in LOCKSTEP_SOLVERS
+        isinstance(solver, str)
+        and (solver in LOCKSTEP_SOLVERS or solver in LOCKSTEP_FIXED)
     ):
         raise ValueError(
             "`solver` for mode='lockstep' must be one of "
-            f"{', '.join(LOCKSTEP_SOLVERS)}; got {solver!r} (or use mode='vmap')."
+            f"{', '.join(list(LOCKSTEP_SOLVERS) + list(LOCKSTEP_FIXED))}; got "
+            f"{solver!r} (or use mode='vmap')."
+        )
+    if mode == "lockstep" and solver in LOCKSTEP_FIXED and jnp.ndim(scene.y0) != 2:
+        raise ValueError(
+            f"mode='lockstep' with solver {solver!r} needs a node-major state "
+            f"(n_nodes, b); got shape {jnp.shape(scene.y0)}."
         )
     if grid:
         if any(a.ndim != 1 for a in arrays):
@@ -430,6 +516,8 @@ def sweep(
         atol=atol,
         n_save=n_save,
         dt0=dt0,
+        newton_rtol=newton_rtol,
+        newton_atol=newton_atol,
         max_steps=max_steps,
         project=project,
     )
