@@ -199,10 +199,10 @@ class TandemLine(AbstractModel):
             dyl, f_root, f_fast = self.line.rates(t, yl, line_eff, root=root, fast=fast)
             tau = self._line_tau(yv, f_root, f_fast)
             dyv = _rhs(self.tandem, t, yv, loads, u, tau)
-        return dyv, dyl, f_root, f_fast, u
+        return dyv, dyl, f_fast, u, root, fast
 
     def vector_field(self, t, y, effects):
-        dyv, dyl, _, _, _ = self._rates(t, y, effects)
+        dyv, dyl, *_ = self._rates(t, y, effects)
         return self.join(dyv, dyl)
 
     def observables(self, t, y, effects):
@@ -213,14 +213,15 @@ class TandemLine(AbstractModel):
         yv, yl = self.split(y)
         s = yv.reshape(2, 6)
         eta = s[:, :3]
-        _, _, f_root, f_fast, u = self._rates(t, y, effects)
-        root, fast = self._mounts(yv)
+        # the mounts the vector field used (with their accelerations, for rigid
+        # end links), so that the link tensions are the ones it applied
+        _, _, f_fast, u, root, fast = self._rates(t, y, effects)
         _, line_eff = split_line_effects(effects)
         P1, P2 = root.position[:2], fast.position[:2]
         D = P1 - P2
         span = jnp.sqrt(jnp.sum(D * D))
         nodes = jnp.concatenate([root.position[None], yl[:, :3], fast.position[None]])
-        ch_T = self._link_tensions(t, yl, line_eff, root, fast)
+        ch_T = self.line._tensions(self.line._chain(t, yl, line_eff, root, fast))
         psi_L = jnp.arctan2(D[1], D[0])
         return {
             "positions": eta[:, :2],
@@ -235,10 +236,6 @@ class TandemLine(AbstractModel):
             "line_tension": ch_T,
             "sag": -jnp.min(yl[:, 2]),
         }
-
-    def _link_tensions(self, t, yl, line_eff, root, fast):
-        ch = self.line._chain(t, yl, line_eff, root, fast)
-        return self.line._tensions(ch)
 
 
 def hawser_line(
