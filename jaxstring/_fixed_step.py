@@ -11,13 +11,22 @@
   A-stable; it equals the trapezoidal rule applied to (q, v).
 
 Both take a fixed step (use `diffrax.ConstantStepSize`; `simulate` does, with
-`dt0`, default 0.005 s) and solve each step by full Newton (a fresh Jacobian at every
-iteration): a fixed-step method cannot reject a step, so its nonlinear solve must not
-give up early. The Jacobian is banded for strings and chains (a few coloured JVPs
-and block cyclic reduction, ``jaxstring._linalg``), so full Newton stays O(k).
-The Newton iteration stops when the scaled update (atol + rtol |y|, RMS) is below
-`kappa`; a step whose iteration has not converged after `max_iters` ends the
-solve with a failed status (never a silently wrong result).
+`dt0`, default 0.005 s). A fixed-step method cannot reject a step, so its nonlinear
+solve must not give up early: by default (`newton="full"`) each step is solved by
+damped full Newton (a fresh Jacobian at every iteration). `newton="chord"` first
+tries simplified Newton updates with one factorisation of the Jacobian at the
+step's start (the production stiff codes' choice) and falls back to the damped full
+Newton from the step's start when they stall. Measured (k = 20, EA = 1e6, dt =
+0.005 s, Newton tolerance 1e-10, session 4): implicit Euler in natural variables
+2.8x faster with the chord; in displacement variables the chord diverges at this
+step (the stiff axis turns with the string; see `jaxstring._root_finder`) and the
+fallback makes it about 5 % slower; the trapezoidal rule gains nothing. The
+Jacobian is banded for strings and chains (a few coloured JVPs and block cyclic
+reduction, ``jaxstring._linalg``), so a step stays O(k). The iteration stops when
+the scaled update (atol + rtol |y|, RMS) is below `kappa` (chord: the update times
+theta / (1 - theta), theta the observed contraction rate); a step whose iteration
+has not converged after `max_iters` ends the solve with a failed status (never a
+silently wrong result).
 
 Newmark needs the node-major layout of the string models: the first half of the
 columns of y are the positions q, the second half their rates v = q'.
@@ -32,6 +41,19 @@ import jax.lax as lax
 import jax.numpy as jnp
 
 from . import _linalg
+
+
+NEWTON_KINDS = ("chord", "full")
+# Chord updates before falling back to full Newton: a contraction rate of 0.1 gains
+# a digit per update, so 10 cover the 1e-10 Newton tolerances of the sweeps.
+_CHORD_ITERS = 10
+
+
+def _check_newton(newton):
+    if newton not in NEWTON_KINDS:
+        raise ValueError(
+            f"`newton` must be one of {NEWTON_KINDS}; got {newton!r}."
+        )
 
 
 def _rms(x):
@@ -65,8 +87,56 @@ class _NewmarkResidual(eqx.Module):
         return a1 - f1[..., m:]
 
 
-def _newton(residual, x0, a, y_of_x, rtol, atol, kappa, max_iters, linear_solver):
+def _chord(fn, fac, r0, x0, scaled, kappa, max_iters):
+    """Simplified Newton x <- x - J0^{-1} r(x) with the factorisation `fac` of the
+    Jacobian at x0 (`r0` = r(x0)). Converged when the estimated distance to the
+    solution, theta / (1 - theta) |dx| with the observed contraction rate theta =
+    |dx_i| / |dx_{i-1}| (Hairer & Wanner IV.8), is below `kappa`; given up when
+    theta >= 1 (not contracting), after `max_iters` updates, or on a non-finite
+    update. Returns (x, converged)."""
+
+    def body(c):
+        x, r, i, prev, _, _ = c
+        dx = fac.solve(r)
+        size = scaled(x, x - dx)
+        x = x - dx
+        theta = jnp.where(i > 0, size / prev, 0.0)
+        done = (size == 0.0) | (
+            (i > 0) & (theta < 1.0) & (theta * size <= kappa * (1.0 - theta))
+        )
+        fail = ~jnp.isfinite(size) | ((i > 0) & (theta >= 1.0))
+        return x, fn(x), i + 1, size, done, fail
+
+    def cond(c):
+        _, _, i, _, done, fail = c
+        return ~done & ~fail & (i < max_iters)
+
+    dtype = jnp.result_type(x0)
+    init = (x0, r0, 0, jnp.array(1e300, dtype), False, False)
+    x, _, _, _, done, _ = lax.while_loop(cond, body, init)
+    return x, done
+
+
+def _newton(
+    residual,
+    x0,
+    a,
+    y_of_x,
+    rtol,
+    atol,
+    kappa,
+    max_iters,
+    linear_solver,
+    chord_iters=0,
+):
     """Damped full Newton for residual(x, a) = 0 from x0. Returns (x, converged).
+
+    With `chord_iters` > 0, first up to that many simplified Newton (chord) updates
+    with the one factorisation of the Jacobian at x0 (`_chord`, as stiff codes do:
+    one factorisation per step instead of one per iteration); if they do not
+    converge, the damped full Newton below restarts from x0. Either way the result
+    is the step's implicit equation solved to the same test, so `newton="chord"`
+    and `"full"` agree to within the Newton tolerance.
 
     Increments are measured in the units of the state y_of_x(x) (atol + rtol |y|,
     RMS). Damping: Deuflhard's natural monotonicity test -- a step of length lam
@@ -117,12 +187,21 @@ def _newton(residual, x0, a, y_of_x, rtol, atol, kappa, max_iters, linear_solver
         return (i < max_iters) & (size > kappa) & jnp.isfinite(size)
 
     dtype = jnp.result_type(x0)
-    x, _, size = lax.while_loop(cond, body, (x0, 0, jnp.array(1e300, dtype)))
+    big = jnp.array(1e300, dtype)
+    if chord_iters > 0:
+        r0, lin0 = jax.linearize(fn, x0)
+        fac0 = _linalg.factor(_linalg.jacobian(fn, x0, width, lin0))
+        x_c, ok_c = _chord(fn, fac0, r0, x0, scaled, kappa, chord_iters)
+        # Converged: the Newton loop below does not run (size 0 <= kappa).
+        start = (jnp.where(ok_c, x_c, x0), 0, jnp.where(ok_c, 0.0, big))
+    else:
+        start = (x0, 0, big)
+    x, _, size = lax.while_loop(cond, body, start)
     return x, size <= kappa
 
 
 class ThetaMethod(dfx.AbstractSolver):
-    """Theta-method with a fixed step and full Newton.
+    """Theta-method with a fixed step (chord or full Newton per step).
 
     **Arguments:**
 
@@ -131,6 +210,10 @@ class ThetaMethod(dfx.AbstractSolver):
     - `kappa`: stop when the scaled update is below `kappa`.
     - `max_iters`: Newton iteration limit per step.
     - `linear_solver`: `"auto"`, `"dense"` or `"banded"`.
+    - `newton`: `"full"` (default): damped full Newton (a fresh Jacobian every
+      iteration); `"chord"`: one Jacobian and factorisation per step, at the step's
+      start, reused by up to 10 simplified Newton updates, and the damped full
+      Newton only when they do not converge. Both solve the step to the same test.
     """
 
     theta: float = eqx.field(static=True, default=0.5)
@@ -139,12 +222,14 @@ class ThetaMethod(dfx.AbstractSolver):
     kappa: float = eqx.field(static=True, default=0.1)
     max_iters: int = eqx.field(static=True, default=100)
     linear_solver: str = eqx.field(static=True, default="auto")
+    newton: str = eqx.field(static=True, default="full")
     term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
     def __check_init__(self):
         if not 0.0 <= float(self.theta) <= 1.0:
             raise ValueError(f"`theta` must lie in [0, 1]; got {self.theta!r}.")
+        _check_newton(self.newton)
 
     def order(self, terms):
         return 2 if self.theta == 0.5 else 1
@@ -171,6 +256,7 @@ class ThetaMethod(dfx.AbstractSolver):
             self.kappa,
             self.max_iters,
             self.linear_solver,
+            _CHORD_ITERS if self.newton == "chord" else 0,
         )
         y1 = y0 + dy
         result = dfx.RESULTS.where(
@@ -180,13 +266,14 @@ class ThetaMethod(dfx.AbstractSolver):
 
 
 class Newmark(dfx.AbstractSolver):
-    """Newmark-beta with a fixed step and full Newton on the acceleration.
+    """Newmark-beta with a fixed step, Newton (chord or full) on the acceleration.
 
     **Arguments:**
 
     - `gamma`, `beta`: Newmark parameters (default 1/2, 1/4: average acceleration,
       order 2). Order 1 when gamma != 1/2.
-    - `rtol`, `atol`, `kappa`, `max_iters`, `linear_solver`: as for `ThetaMethod`.
+    - `rtol`, `atol`, `kappa`, `max_iters`, `linear_solver`, `newton`: as for
+      `ThetaMethod`.
 
     The state's last axis is (q, v) halves with q' = v (all jaxstring strings).
     """
@@ -198,6 +285,7 @@ class Newmark(dfx.AbstractSolver):
     kappa: float = eqx.field(static=True, default=0.1)
     max_iters: int = eqx.field(static=True, default=100)
     linear_solver: str = eqx.field(static=True, default="auto")
+    newton: str = eqx.field(static=True, default="full")
     term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
@@ -207,6 +295,7 @@ class Newmark(dfx.AbstractSolver):
                 "Newmark needs 0 <= `beta` <= 1/2 and 0 <= `gamma` <= 1; got "
                 f"beta={self.beta!r}, gamma={self.gamma!r}."
             )
+        _check_newton(self.newton)
 
     def order(self, terms):
         return 2 if self.gamma == 0.5 else 1
@@ -240,6 +329,7 @@ class Newmark(dfx.AbstractSolver):
             self.kappa,
             self.max_iters,
             self.linear_solver,
+            _CHORD_ITERS if self.newton == "chord" else 0,
         )
         y1 = res.state(a1, a)
         result = dfx.RESULTS.where(

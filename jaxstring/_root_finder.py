@@ -26,9 +26,13 @@ With ``newton=True`` the Jacobian is recomputed at every iteration (full Newton)
 the right choice for fixed-step methods, which cannot reject a step.
 
 Jacobian refresh (``refresh=True``, the default): when the iteration contracts
-slowly (rate > ``refresh_rate``) or diverges, the Jacobian is recomputed at the
-current iterate, up to ``max_jacobians`` times per solve, before divergence is
-declared -- as production stiff codes refresh on convergence failure. This is what
+slowly (rate > ``refresh_rate``), diverges, or contracts too slowly to converge
+within ``max_iters`` (Hairer's prediction), the Jacobian is recomputed at the
+current iterate, up to ``max_jacobians`` times per solve (default 10), before
+divergence is declared -- as production stiff codes refresh on convergence failure.
+(Refreshing on the prediction as well, and allowing 10 Jacobians instead of 3,
+halved Kvaerno5's steps at k = 40, EA = 1e6 and 1e9: session-4 numbers in
+``experiments/results/bench_solvers_refresh.md``.) This is what
 makes the displacement string at EA >= 1e5 cheap: its stiff force
 N = EA (|D r| - 1) t is strongly nonlinear in the state (the stiff axis turns with
 the string, and the transverse "geometric" stiffness N / h is proportional to a strain
@@ -131,7 +135,8 @@ class StageNewton(optx.AbstractRootFinder):
       over the members and is built and factorised per member (see
       `batched_factor`).
     - `refresh`: recompute the Jacobian at the current iterate when the iteration
-      contracts slower than `refresh_rate`, at most `max_jacobians` Jacobians per
+      contracts slower than `refresh_rate` (or, with `refresh_when_hopeless`, too
+      slowly to converge within `max_iters`), at most `max_jacobians` Jacobians per
       solve (the initial one included).
     """
 
@@ -144,7 +149,8 @@ class StageNewton(optx.AbstractRootFinder):
     linear_solver: str = eqx.field(static=True, default="auto")
     refresh: bool = eqx.field(static=True, default=True)
     refresh_rate: float = 0.5
-    max_jacobians: int = 3
+    max_jacobians: int = 10
+    refresh_when_hopeless: bool = eqx.field(static=True, default=True)
 
     def _factor(self, fn, y, args):
         noaux = _NoAux(fn)
@@ -207,7 +213,18 @@ class StageNewton(optx.AbstractRootFinder):
         n_jac = state.n_jac + jnp.where(fresh, 1, 0)
         rate = diffsize / state.diffsize
         slow = (state.step >= 1) & ~(rate <= self.refresh_rate)
-        refresh_next = slow & (n_jac < self.max_jacobians) & self.refresh
+        # Also refresh (rather than give up) when the contraction, though below
+        # `refresh_rate`, is predicted too slow to converge within `max_iters`:
+        # with a stale Jacobian on a very stiff string (EA = 1e9) this prediction,
+        # not a rate >= 1, is what fails most steps.
+        remaining = jnp.maximum(self.max_iters - state.step - 1, 0)
+        hopeless = (
+            (state.step >= 1)
+            & (rate < 1)
+            & (rate**remaining / (1 - rate) * diffsize > self.kappa)
+            & self.refresh_when_hopeless
+        )
+        refresh_next = (slow | hopeless) & (n_jac < self.max_jacobians) & self.refresh
         new_state = _StageState(
             linear_state=fac,
             diffsize=diffsize,

@@ -10,6 +10,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring._controller import NewtonLimitedController, make_controller
+from jaxstring._root_finder import StageNewton
 
 
 K, EA, T1 = 10, 1e8, 0.5
@@ -31,11 +32,15 @@ def test_newton_failures_no_longer_cycle_the_step_size():
     keeps the step below the Newton limit: 16x fewer rejections, under half the
     attempts, and the same accuracy."""
     sc, ref = _reference()
+    # The stage Newton iteration as it was when the controller was written (a
+    # refresh only on a contraction rate > 1/2, at most 3 Jacobians): its failures
+    # are what the controller must handle. (The refresh on predicted divergence
+    # that is now the default removes most of them: test_fast_solvers.)
+    rf = StageNewton(rtol=1e-6, atol=1e-6, refresh_when_hopeless=False, max_jacobians=3)
+    solver = dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
     out = {}
     for control in ("pid", "auto"):
-        tr = js.simulate(
-            sc, "kvaerno5", rtol=1e-6, atol=1e-6, ts=TS, step_control=control
-        )
+        tr = js.simulate(sc, solver, rtol=1e-6, atol=1e-6, ts=TS, step_control=control)
         assert tr.ok
         err = np.max(np.linalg.norm(np.asarray(tr.end_mass) - ref, axis=-1))
         acc = int(tr.stats["num_accepted_steps"])
