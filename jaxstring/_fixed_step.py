@@ -51,9 +51,7 @@ _CHORD_ITERS = 10
 
 def _check_newton(newton):
     if newton not in NEWTON_KINDS:
-        raise ValueError(
-            f"`newton` must be one of {NEWTON_KINDS}; got {newton!r}."
-        )
+        raise ValueError(f"`newton` must be one of {NEWTON_KINDS}; got {newton!r}.")
 
 
 def _rms(x):

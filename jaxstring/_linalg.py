@@ -151,15 +151,43 @@ def detect_width(fn, y, args=None, max_width: int = 4):
         return None
 
 
+def _is_scene(x) -> bool:
+    return all(hasattr(x, a) for a in ("model", "effects", "y0")) and hasattr(
+        getattr(x, "model", None), "node_bandwidth"
+    )
+
+
+def declared_width(fn, y, args=None):
+    """The node bandwidth the scene's model declares (`AbstractModel.node_bandwidth`)
+    when exactly one scene is found in `fn` and `args` (the ODE's arguments inside a
+    solver's stage relation) and the unknown `y` has the scene's state shape, else
+    None. The stage relations of implicit methods (y - c f(y) and the like) have the
+    band of the vector field."""
+    if not (hasattr(y, "shape") and len(y.shape) == 2):
+        return None
+    leaves = jtu.tree_leaves((fn, args), is_leaf=_is_scene)
+    scenes = [x for x in leaves if _is_scene(x)]
+    if len(scenes) != 1:
+        return None
+    scene = scenes[0]
+    if tuple(np.shape(scene.y0)) != tuple(y.shape):
+        return None
+    return scene.model.node_bandwidth(scene.effects)
+
+
 def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
     """Return the node bandwidth to use (int) or None for the dense path.
 
     `linear_solver`: "dense", "banded" (raises if no band is found) or "auto"
-    (banded for large enough systems with a narrow band).
+    (banded for large enough systems with a narrow band). The band is the one the
+    scene's model declares (`declared_width`), or else detected by probing
+    (`detect_width`: about 1.5-2 s of trace-time compilation per new relation).
     """
     if linear_solver == "dense":
         return None
-    width = detect_width(fn, y, args)
+    width = declared_width(fn, y, args)
+    if width is None:
+        width = detect_width(fn, y, args)
     if linear_solver == "banded":
         if width is None:
             raise ValueError(

@@ -41,3 +41,12 @@ class AbstractModel(eqx.Module):
     @abc.abstractmethod
     def project(self, y) -> Array:
         """The nearest state on the constraint manifold."""
+
+    def node_bandwidth(self, effects) -> int | None:
+        """The node bandwidth of the Jacobian of `vector_field` under `effects`, if
+        the model knows it (node-major state `(n, b)` where node i couples to nodes
+        i - w ... i + w), else None. Implicit solvers then skip detecting the band
+        by probing (`jaxstring._linalg.detect_width`), which costs an extra XLA
+        compilation at trace time. Default: None (detect)."""
+        del effects
+        return None

@@ -21,7 +21,16 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._effects import Kinematics, apply_laws, elastic_strain, split_effects, total_loads
+from ._effects import (
+    Gravity,
+    KelvinVoigt,
+    Kinematics,
+    Slack,
+    apply_laws,
+    elastic_strain,
+    split_effects,
+    total_loads,
+)
 from ._geometry import direction, safe_norm
 from ._model import AbstractModel
 from ._validate import check_int, check_positive
@@ -48,6 +57,15 @@ class AbstractString(AbstractModel):
 
     def state_shape(self):
         return jnp.shape(self.initial_state(0.0))
+
+    def node_bandwidth(self, effects):
+        """1 (each node couples to its neighbours) under jaxstring's own string
+        effects, which act element by element; None (detect) if any other effect
+        is present. tests/test_fast_solvers.py checks it against detection."""
+        local = (Gravity, KelvinVoigt, Slack)
+        if all(type(e) in local for e in effects):
+            return 1
+        return None
 
     def observables(self, t, y, effects):
         """Node positions and velocities (pivot included), tension and strain at the

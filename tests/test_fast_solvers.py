@@ -312,3 +312,33 @@ def test_refresh_before_predicted_divergence():
     ref = js.simulate(scene, "rodas5p", rtol=1e-11, atol=1e-11, ts=ts)
     assert _err(runs["new"], ref) < 1e-5
     assert _err(runs["new"], runs["old"]) < 1e-5
+
+
+@pytest.mark.parametrize(
+    "formulation, dim",
+    [
+        ("displacement", 2),
+        ("displacement", 3),
+        ("natural", 2),
+        ("natural", 3),
+        ("angle", 2),
+    ],
+)
+def test_declared_band_equals_the_detected_band(formulation, dim):
+    # The string models declare their Jacobian's node bandwidth, so that implicit
+    # solvers skip the trace-time probe (1.5-2 s of compilation per relation):
+    # the declaration must be what probing finds, with every string effect on.
+    from jaxstring._simulate import scene_vector_field
+
+    scene = js.scenes.string_pendulum(
+        formulation=formulation,
+        k=12,
+        dim=dim,
+        effects=("gravity", "kelvin_voigt", "slack"),
+    )
+    vf = lambda y, a: scene_vector_field(0.3, y, a)
+    declared = _linalg.declared_width(vf, scene.y0, scene)
+    assert declared == 1
+    assert _linalg.detect_width(vf, scene.y0, scene) == declared
+    # Not for a state of another shape (e.g. Newmark's accelerations).
+    assert _linalg.declared_width(vf, scene.y0[:, :2], scene) is None
