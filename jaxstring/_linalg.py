@@ -38,6 +38,8 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array
 
+from ._scene import Scene
+
 
 # Below this many unknowns the dense path is as fast (few JVPs either way) and has
 # fewer ops to compile.
@@ -151,12 +153,6 @@ def detect_width(fn, y, args=None, max_width: int = 4):
         return None
 
 
-def _is_scene(x) -> bool:
-    return all(hasattr(x, a) for a in ("model", "effects", "y0")) and hasattr(
-        getattr(x, "model", None), "node_bandwidth"
-    )
-
-
 def declared_width(fn, y, args=None):
     """The node bandwidth the scene's model declares (`AbstractModel.node_bandwidth`)
     when exactly one scene is found in `fn` and `args` (the ODE's arguments inside a
@@ -165,8 +161,8 @@ def declared_width(fn, y, args=None):
     band of the vector field."""
     if not (hasattr(y, "shape") and len(y.shape) == 2):
         return None
-    leaves = jtu.tree_leaves((fn, args), is_leaf=_is_scene)
-    scenes = [x for x in leaves if _is_scene(x)]
+    is_scene = lambda x: isinstance(x, Scene)
+    scenes = [x for x in jtu.tree_leaves((fn, args), is_leaf=is_scene) if is_scene(x)]
     if len(scenes) != 1:
         return None
     scene = scenes[0]

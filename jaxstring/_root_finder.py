@@ -152,6 +152,13 @@ class StageNewton(optx.AbstractRootFinder):
     max_jacobians: int = 10
     refresh_when_hopeless: bool = eqx.field(static=True, default=True)
 
+    def _too_slow(self, rate, size, done):
+        """Hairer's prediction: contracting at `rate` (< 1) from an update of scaled
+        `size` after `done` iterations, the iteration cannot get below `kappa`
+        within `max_iters`."""
+        remaining = jnp.maximum(self.max_iters - done, 0)
+        return (rate < 1) & (rate**remaining / (1 - rate) * size > self.kappa)
+
     def _factor(self, fn, y, args):
         noaux = _NoAux(fn)
         if self.linear_solver in BATCHED_LINEAR_SOLVERS:
@@ -217,11 +224,9 @@ class StageNewton(optx.AbstractRootFinder):
         # `refresh_rate`, is predicted too slow to converge within `max_iters`:
         # with a stale Jacobian on a very stiff string (EA = 1e9) this prediction,
         # not a rate >= 1, is what fails most steps.
-        remaining = jnp.maximum(self.max_iters - state.step - 1, 0)
         hopeless = (
             (state.step >= 1)
-            & (rate < 1)
-            & (rate**remaining / (1 - rate) * diffsize > self.kappa)
+            & self._too_slow(rate, diffsize, state.step + 1)
             & self.refresh_when_hopeless
         )
         refresh_next = (slow | hopeless) & (n_jac < self.max_jacobians) & self.refresh
@@ -250,11 +255,8 @@ class StageNewton(optx.AbstractRootFinder):
         contracting = have_rate & (rate < 1)
         eta = rate / (1 - rate)
         converged = first_ok | tiny | (contracting & (eta * size <= self.kappa))
-        remaining = jnp.maximum(self.max_iters - state.step, 0)
         hopeless = (
-            contracting
-            & (rate**remaining / (1 - rate) * size > self.kappa)
-            & (not self.newton)
+            have_rate & self._too_slow(rate, size, state.step) & (not self.newton)
         )
         if self.newton:
             diverged = ~finite | (have_rate & (rate >= 1) & (state.step >= 4))
