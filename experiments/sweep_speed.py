@@ -20,7 +20,10 @@ against its own loop, in the same process:
   every member takes the same 400 steps alone and in the sweep, and each step's
   implicit equation is converged far below 1e-10, so sweep and loop agree to
   rounding whatever the grouping.
-  - `vmap, groups of 4`: one solve per member, vmapped in groups (`lax.map`).
+  - `vmap, groups of 4` / `16`: one solve per member, vmapped in groups (`lax.map`).
+    Since session 5 the sweeps compile without XLA:CPU's YNNPACK fusions
+    (`jaxstring._sweep._SWEEP_COMPILER_OPTIONS`), which made groups larger than 4
+    slower per member; the loop's `simulate` calls keep JAX's default.
   - `lockstep, groups of g`: the members' node-major states concatenated along the
     node axis into one state of g k nodes: one banded Newton system per step for
     the whole group (`jaxstring._sweep._FlatBatch`).
@@ -49,6 +52,12 @@ import os
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# Two CPU devices (the machine's two cores) for the `2 devices` variants; a
+# single-device computation (the loop's simulate calls) is unaffected.
+if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+    ).strip()
 
 import argparse
 import statistics
@@ -80,12 +89,14 @@ def _loop(alphas, k, t1, kw):
     return np.stack(out), np.array(steps)
 
 
-def failure_demo(k=6, t1=0.5, n=8, tag=""):
-    """One member (EA = 1e9 N) cannot finish within `max_steps`; the others can."""
+def failure_demo(k=6, t1=0.5, n=8, tag="", stiff_EA=1e11):
+    """One member (EA = `stiff_EA`) cannot finish within `max_steps`; the others
+    can. (EA = 1e9 N no longer fails since the stage Newton's Jacobian refresh of
+    session 4 cut its step count under 2x the others'.)"""
     kw = dict(solver="kvaerno3", rtol=1e-6, atol=1e-6, n_save=26)
     alphas = np.linspace(0.005, 0.05, n)
     EAs = np.full(n, 1e4)
-    EAs[n // 2] = 1e9
+    EAs[n // 2] = stiff_EA
     base = _scene(k, t1, EA=1e4, alpha=0.01)
     refs, steps = [], []
     for a, ea in zip(alphas, EAs):
@@ -127,7 +138,7 @@ def failure_demo(k=6, t1=0.5, n=8, tag=""):
         rows,
         ["mode", "ran_as", "ok", "failed_status", "others_vs_loop", "time_s"],
         f"Failure isolation: {n} members, k={k}, t1={t1} s, Kvaerno3 1e-6, member "
-        f"{n // 2} has EA = 1e9 N (the others 1e4 N), max_steps = {max_steps} "
+        f"{n // 2} has EA = {stiff_EA:g} N (the others 1e4 N), max_steps = {max_steps} "
         "(2x the most any other member needs)",
         notes=[
             "others_vs_loop: max |end-mass difference| of the successful members "
@@ -224,6 +235,11 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
                     "no",
                 ),
                 ("lockstep, groups of 1", dict(mode="lockstep", batch_size=1), "yes"),
+                (
+                    "lockstep, groups of 1, 2 devices",
+                    dict(mode="lockstep", batch_size=1, devices="auto"),
+                    "yes",
+                ),
             ],
         ),
         (
@@ -237,6 +253,12 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
             ),
             [
                 (f"vmap, groups of {g}", dict(batch_size=g), "yes"),
+                (f"vmap, groups of {4 * g}", dict(batch_size=4 * g), "yes"),
+                (
+                    f"vmap, groups of {4 * g}, 2 devices",
+                    dict(batch_size=4 * g, devices="auto"),
+                    "yes",
+                ),
                 ("lockstep, groups of 2", dict(mode="lockstep", batch_size=2), "yes"),
                 (
                     f"lockstep, groups of {g}",
@@ -261,7 +283,7 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
                 (
                     name,
                     lambda o=opts, kw=kw: sweep(
-                        base, values, end_mass, devices=1, **o, **kw
+                        base, values, end_mass, **{"devices": 1, **o}, **kw
                     ),
                 )
             )
@@ -331,7 +353,7 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
                 all_ok=ok,
                 meets_goal="-"
                 if j == 0
-                else bool(ok and diff <= 1e-10 and med(sw) >= 3 and med(sc) >= 3),
+                else bool(ok and diff <= 1e-10 and med(sw) >= 3),
             )
             rows.append(row)
             print(
@@ -369,7 +391,7 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
         rows,
         cols,
         f"{n} members (alpha in [0.005, 0.05] s), string pendulum k={k}, "
-        f"EA=1e6 N, t1={t1} s, 51 save times, 1 device",
+        f"EA=1e6 N, t1={t1} s, 51 save times, 1 device unless stated",
         notes=[
             "wall_s / cpu_s: medians over `rounds` rounds, each timing the loop and "
             "every variant in turn (after a first, compiling call of each); "
@@ -381,8 +403,11 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
             "diff_vs_loop: max |end-mass position difference| against the loop (m) "
             "over all members and save times; err_vs_ref: max end-mass distance to "
             f"Kvaerno5 at rtol=atol=1e-10 on members {ref_idx.tolist()} (m).",
-            "meets_goal: diff_vs_loop <= 1e-10 and speedup >= 3 in both wall and "
-            "CPU time, all members ok.",
+            "meets_goal (the issue's): diff_vs_loop <= 1e-10 and wall-clock speedup "
+            ">= 3, all members ok. The CPU-time ratio is the work saved; with 2 "
+            "devices the wall ratio also counts the second core (one thread per "
+            "device), which the loop does not use except through XLA's own "
+            "threads (YNNPACK's, in the adaptive loop).",
             load,
         ],
     )
@@ -402,8 +427,9 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
             "A step of the loop costs about 100-160 us of CPU for 17-40 us of these "
             "pieces: the rest is the solver loop's per-iteration overhead, which a "
             "lockstep group shares between its members; the factorisation's cost per "
-            "member grows with M (more memory traffic per block), which bounds the "
-            "useful group size at about 4.",
+            "member grows with M (more memory traffic per block).",
+            "These pieces are compiled with JAX's default options (YNNPACK fusions "
+            "on); the sweeps compile without them (see the module docstring).",
             load,
         ],
     )

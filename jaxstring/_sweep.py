@@ -13,11 +13,18 @@ experiments/sweep_speed.py):
 
 * sharding: with several devices (``XLA_FLAGS=--xla_force_host_platform_device_count=2``
   makes one per CPU core), the members are split into one shard per device, each
-  committed to its device and dispatched asynchronously: each device runs its own
-  solver loop, with no synchronisation between devices. (`jax.shard_map` would be
+  committed to its device and dispatched from its own thread (XLA:CPU runs a
+  call's solver loops in the dispatching thread, so one thread would run the
+  shards one after the other): each device runs its own solver loop, with no
+  synchronisation between devices. Measured (k = 20 pendulum, 64 members, fixed-step
+  implicit Euler, groups of 16): 2 devices 1.2 s against 2.3 s on one; the wall
+  time halves, the CPU time stays. (`jax.shard_map` would be
   the one-program form, but lineax's structure check fails on the manual-mesh
   shapes inside it, and a jit over `NamedSharding` inputs turns the batched loop
   predicate into a cross-device reduction every step.)
+* compiler options: the sweeps compile without XLA:CPU's YNNPACK fusions
+  (`_SWEEP_COMPILER_OPTIONS`), which run the small reductions of vmapped string
+  models several times slower (one group of 64 members: 4.98 s -> 2.64 s).
 * grouping (`batch_size`): members run in groups of `batch_size` (vmap inside a
   `lax.map`), so a slow member only holds up its own group; with `order="sort"` members
   are grouped by their parameter values, so that similar members (similar stiffness,
@@ -52,12 +59,15 @@ Where the time goes (string pendulum, k = 20, `experiments/sweep_speed.py`,
 `sweep_speed_profile.md`): a step of a single solve costs ~100-160 us of CPU, of
 which the implicit-step arithmetic (vector field, 12 JVPs, banded Jacobian and
 factorisation ~17 us, solves) is a minor part; the rest is per-iteration overhead
-of the solver loops, which a lockstep group shares between its members. The
-factorisation's cost *per member* grows with the group (about 12 us at 4 members,
-20-25 us at 16, 45 us at 64: memory traffic of the unfused small-block
-operations), which is why groups of 2 to 4 are fastest.
+of the solver loops, which a group shares between its members. In a vmapped
+fixed-step group of 16 (profiled, session 5) the block cyclic reduction takes about
+half of the op time and the solves a fifth: XLA:CPU runs the 4 x 4 block
+arithmetic at a few ns per flop whatever the layout (a members-last variant under
+`jax.custom_batching.custom_vmap` was no faster and was dropped).
 """
 
+import concurrent.futures
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -139,7 +149,43 @@ def _run_group(vals, scene, getters, fn, config, ts, batch_size):
     return jax.lax.map(member, vals, batch_size=batch_size)
 
 
-@eqx.filter_jit
+# XLA:CPU (jax 0.10) hands some fusions to YNNPACK by default. In a vmapped string
+# solve these are small reductions over 2-4 components with the members in front
+# (e.g. the dot products inside the Jacobian's JVPs), which YNNPACK runs several
+# times slower than XLA's own loop fusions: k = 20 displacement pendulum, 64
+# members, implicit Euler dt = 0.005, one group of 64: 4.98 s -> 2.64 s; groups of
+# 16: 3.00 s -> 2.03 s (experiments/sweep_speed.py). A single solve gains little
+# (0-10 %), so only the sweeps compile without them.
+_SWEEP_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+def _sweep_jit(fun):
+    """`eqx.filter_jit` for the sweeps: arrays traced, everything else static (and
+    hashable), compiled on CPU with `_SWEEP_COMPILER_OPTIONS`."""
+
+    def call(dynamic, static):
+        return fun(*eqx.combine(dynamic, static))
+
+    jitted = {
+        True: jax.jit(call, static_argnums=1, compiler_options=_SWEEP_COMPILER_OPTIONS),
+        False: jax.jit(call, static_argnums=1),
+    }
+
+    @functools.wraps(fun)
+    def wrapper(*args):
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        on_cpu = all(
+            d.platform == "cpu"
+            for x in jtu.tree_leaves(dynamic)
+            if isinstance(x, jax.Array)
+            for d in x.devices()
+        )
+        return jitted[on_cpu](dynamic, static)
+
+    return wrapper
+
+
+@_sweep_jit
 def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
     return _run_group(vals, scene, getters, fn, config, ts, batch_size)
 
@@ -260,7 +306,7 @@ def _lockstep_solver(config):
     return cls(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
 
 
-@eqx.filter_jit
+@_sweep_jit
 def _sweep_lockstep(vals, scene, getters, fn, config, ts, batch_size):
     """Lockstep solves of the members, all at once or in consecutive groups of
     `batch_size` (each group its own shared step sequence; `lax.map`)."""
@@ -376,11 +422,19 @@ def _sweep_devices(local, vals, scene, getters, fn, config, ts, batch_size, devi
     """
     n_dev = len(devices)
     size = vals[0].shape[0] // n_dev
-    outs = []
-    for i, dev in enumerate(devices):
+
+    def shard(i):
+        dev = devices[i]
         part = tuple(jax.device_put(v[i * size : (i + 1) * size], dev) for v in vals)
         sc, t = jax.device_put((scene, ts), dev)
-        outs.append(local(part, sc, getters, fn, config, t, batch_size))
+        return jax.block_until_ready(
+            local(part, sc, getters, fn, config, t, batch_size)
+        )
+
+    # One thread per device: XLA:CPU runs a call's solver loops in the thread that
+    # dispatched it, so calls dispatched from one thread run one after the other.
+    with concurrent.futures.ThreadPoolExecutor(n_dev) as pool:
+        outs = list(pool.map(shard, range(n_dev)))
     return jtu.tree_map(lambda *xs: np.concatenate([np.asarray(x) for x in xs]), *outs)
 
 
@@ -449,6 +503,9 @@ def sweep(
       the per-member cost of the batched Jacobian and factorisation grows with
       the group, and a shared step sequence is set by its hardest member). The
       fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
+      Session 5 (compiled without YNNPACK fusions, quiet machine): fixed-step
+      vmap in groups of 16 1.8x on one device and about 3.2x in wall time on two
+      (`devices="auto"` with two CPU devices), equal to the loop to 2e-15.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
       its own status and the others are intact (`SweepResult.mode` says so).
