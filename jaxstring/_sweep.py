@@ -504,7 +504,7 @@ def sweep(
       the group, and a shared step sequence is set by its hardest member). The
       fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
       Session 5 (compiled without YNNPACK fusions, quiet machine): fixed-step
-      vmap in groups of 16 1.8x on one device and about 3.2x in wall time on two
+      vmap in groups of 16 1.8x on one device and 2.9-3.3x in wall time on two
       (`devices="auto"` with two CPU devices), equal to the loop to 2e-15.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets

@@ -108,19 +108,25 @@ def test_stage_newton_avoids_veryChord_early_divergence():
 
 
 @pytest.mark.parametrize("formulation", ["natural", "displacement"])
-def test_fixed_step_chord_newton_solves_the_same_steps(formulation):
+def test_fixed_step_newton_variants_solve_the_same_steps(formulation):
     # newton="chord": one factorisation per step and simplified Newton updates; in
     # natural variables they converge, in displacement variables at EA = 1e6 they
     # diverge (the stiff axis turns with the string) and the damped full Newton
     # takes over. Either way each step's implicit equation is solved to the same
     # test, so with a 1e-10 Newton tolerance the two trajectories agree to ~1e-10
     # (the iteration error), far below implicit Euler's own error at dt = 0.005.
+    # The same holds for the Newton start: extrapolated from the previous step's
+    # increment (the default) or zero.
     scene = js.scenes.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
     out = {}
-    for newton in ("full", "chord"):
-        solver = js.ThetaMethod(theta=1.0, rtol=1e-10, atol=1e-10, newton=newton)
-        out[newton] = js.simulate(scene, solver, dt0=0.005, n_save=26)
-        assert out[newton].ok, out[newton].status
-    assert _err(out["chord"], out["full"]) < 1e-9
+    for newton, extrapolate in (("full", True), ("chord", True), ("full", False)):
+        solver = js.ThetaMethod(
+            theta=1.0, rtol=1e-10, atol=1e-10, newton=newton, extrapolate=extrapolate
+        )
+        key = (newton, extrapolate)
+        out[key] = js.simulate(scene, solver, dt0=0.005, n_save=26)
+        assert out[key].ok, out[key].status
+    assert _err(out[("chord", True)], out[("full", True)]) < 1e-9
+    assert _err(out[("full", False)], out[("full", True)]) < 1e-9
     with pytest.raises(ValueError, match="newton"):
         js.ThetaMethod(theta=1.0, newton="quasi")
