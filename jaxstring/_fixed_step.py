@@ -126,6 +126,7 @@ def _newton(
     max_iters,
     linear_solver,
     chord_iters=0,
+    x_restart=None,
 ):
     """Damped full Newton for residual(x, a) = 0 from x0. Returns (x, converged).
 
@@ -154,8 +155,16 @@ def _newton(
         size = _rms(dy / (atol + rtol * jnp.abs(y_of_x(x_to))))
         return jnp.where(jnp.isfinite(size), size, jnp.inf)
 
+    restart_at = max(max_iters // 4, 1)
+
     def body(carry):
         x, i, _ = carry
+        if x_restart is not None:
+            # A predicted start that has not converged in a quarter of the
+            # iterations, or whose iteration overflowed, is dropped for the plain
+            # one (the predictor can point the damped iteration into a slow region
+            # at a sudden change of motion).
+            x = jnp.where(i == restart_at, x_restart, x)
         r, lin = jax.linearize(fn, x)
         fac = _linalg.factor(_linalg.jacobian(fn, x, width, lin))
         dx = fac.solve(r)
@@ -188,11 +197,19 @@ def _newton(
         # longer reproduces the loop to rounding; measured in session 6.)
         done = (size > kappa) & (bar_size <= kappa)
         x_new = jnp.where(done, x_new - bar, x_new)
-        return x_new, i + 1, jnp.where(done, 0.0, size)
+        i_next = i + 1
+        if x_restart is not None:
+            i_next = jnp.where(
+                jnp.isfinite(size) | (i >= restart_at), i_next, restart_at
+            )
+        return x_new, i_next, jnp.where(done, 0.0, size)
 
     def cond(carry):
         _, i, size = carry
-        return (i < max_iters) & (size > kappa) & jnp.isfinite(size)
+        finite = jnp.isfinite(size)
+        if x_restart is not None:
+            finite = finite | (i == restart_at)
+        return (i < max_iters) & (size > kappa) & finite
 
     dtype = jnp.result_type(x0)
     big = jnp.array(1e300, dtype)
@@ -280,6 +297,7 @@ class ThetaMethod(dfx.AbstractSolver):
             self.max_iters,
             self.linear_solver,
             _CHORD_ITERS if self.newton == "chord" else 0,
+            jnp.zeros_like(y0) if self.extrapolate else None,
         )
         y1 = y0 + dy
         result = dfx.RESULTS.where(

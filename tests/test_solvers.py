@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
+from jaxstring._fixed_step import _newton
 
 from .helpers import fitted_order, run
 
@@ -130,3 +131,17 @@ def test_fixed_step_newton_variants_solve_the_same_steps(formulation):
     assert _err(out[("full", False)], out[("full", True)]) < 1e-9
     with pytest.raises(ValueError, match="newton"):
         js.ThetaMethod(theta=1.0, newton="quasi")
+
+
+def test_newton_restarts_from_the_plain_start_when_the_predicted_one_fails():
+    # ThetaMethod starts each step's Newton iteration from the previous increment
+    # (a prediction) and keeps the plain start (zero increment) as a restart point.
+    # Newton on arctan(x) = 0 from x = 1e3 overshoots to |x| ~ 1e6 and overflows
+    # even with damping; from the restart point x = 0.5 it converges to the root.
+    res = lambda x, a: jnp.arctan(x)
+    x0, restart = jnp.array([1e3]), jnp.array([0.5])
+    kw = dict(rtol=1e-12, atol=1e-12, kappa=0.1, max_iters=100, linear_solver="dense")
+    x, ok = _newton(res, x0, None, lambda x: x, **kw)
+    assert not bool(ok) and not np.isfinite(float(x[0]))
+    x, ok = _newton(res, x0, None, lambda x: x, **kw, x_restart=restart)
+    assert bool(ok) and abs(float(x[0])) < 1e-12
