@@ -156,15 +156,17 @@ def _newton(
         size = _rms(dy / (atol + rtol * jnp.abs(y_of_x(x_to))))
         return jnp.where(jnp.isfinite(size), size, jnp.inf)
 
+    # A predicted start x0 that has not converged in a quarter of the iterations,
+    # or whose iteration overflowed, is dropped for the plain one `x_restart` (the
+    # predictor can point the damped iteration into a slow region at a sudden
+    # change of motion). Not when the two are the same start (a first step).
     restart_at = max(max_iters // 4, 1)
+    if x_restart is not None:
+        restart_at = jnp.where(jnp.any(x0 != x_restart), restart_at, -1)
 
     def body(carry):
         x, i, _ = carry
         if x_restart is not None:
-            # A predicted start that has not converged in a quarter of the
-            # iterations, or whose iteration overflowed, is dropped for the plain
-            # one (the predictor can point the damped iteration into a slow region
-            # at a sudden change of motion).
             x = jnp.where(i == restart_at, x_restart, x)
         r, lin = jax.linearize(fn, x)
         fac = _linalg.factor(_linalg.jacobian(fn, x, width, lin))
@@ -188,25 +190,24 @@ def _newton(
         _, x_new, bar, bar_size = lax.while_loop(
             damp_cond, damp_body, (one, *trial(one))
         )
-        # The simplified Newton correction `bar` at x_new is already computed (for
-        # the damping test). When it is below kappa -- the test a full Newton
-        # update would have to pass -- apply it and stop, instead of paying one
-        # more Jacobian and factorisation for that update. (Stopping already when
-        # Hairer & Wanner's estimate theta / (1 - theta) |bar| is below kappa
-        # saves one more iteration, but leaves each member's solution about
-        # kappa * tol from the exact root instead of to rounding, so a sweep no
-        # longer reproduces the loop to rounding; measured in session 6.) Off
-        # for Newmark: with it, Newmark's Newton diverged at step 329 of the
-        # k = 40, EA = 1e6 pendulum at Newton tol 1e-6 (it had run; not
-        # understood, session 6).
-        done = (size > kappa) & (bar_size <= kappa) & early_stop
-        x_new = jnp.where(done, x_new - bar, x_new)
+        if early_stop:
+            # The simplified correction `bar` at x_new is already computed (for
+            # the damping test). When it is below kappa -- the test a full Newton
+            # update would have to pass -- apply it and stop, instead of paying
+            # one more Jacobian and factorisation for that update. (Hairer &
+            # Wanner's looser theta / (1 - theta) |bar| <= kappa saves one more
+            # iteration but leaves the root about kappa * tol off, so a sweep no
+            # longer reproduces the loop to rounding.) Newmark passes False: with
+            # it, Newmark's Newton diverged at step 329 of the k = 40, EA = 1e6
+            # pendulum at Newton tol 1e-6 (not understood).
+            done = (size > kappa) & (bar_size <= kappa)
+            x_new = jnp.where(done, x_new - bar, x_new)
+            size = jnp.where(done, 0.0, size)
         i_next = i + 1
         if x_restart is not None:
-            i_next = jnp.where(
-                jnp.isfinite(size) | (i >= restart_at), i_next, restart_at
-            )
-        return x_new, i_next, jnp.where(done, 0.0, size)
+            overflowed = ~jnp.isfinite(size) & (i < restart_at)
+            i_next = jnp.where(overflowed, restart_at, i_next)
+        return x_new, i_next, size
 
     def cond(carry):
         _, i, size = carry

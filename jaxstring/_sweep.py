@@ -507,7 +507,7 @@ def sweep(
       vmap in groups of 16 1.8x on one device and 2.9-3.3x in wall time on two
       (`devices="auto"` with two CPU devices), equal to the loop to 2e-15.
       Session 6 (Newton started from the previous step's increment, in the loop
-      and the sweep alike): 1.7x on one device, 3.1x on two (2.9-3.5x in nine
+      and the sweep alike): 1.7x on one device, 3.1x on two (2.9-3.5x in ten
       runs); groups of 8 on two devices were about 5 % faster than 16.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
