@@ -43,7 +43,12 @@ from ._root_finder import StageNewton as StageNewton
 from ._rosenbrock import Rodas5P as Rodas5P
 from ._scene import Scene as Scene
 from ._simulate import simulate as simulate
-from ._solvers import SOLVERS as SOLVERS
+from ._solvers import (
+    SOLVERS as SOLVERS,
+    Kvaerno3 as Kvaerno3,
+    Kvaerno4 as Kvaerno4,
+    Kvaerno5 as Kvaerno5,
+)
 from ._string import (
     AbstractString as AbstractString,
     DisplacementString as DisplacementString,

@@ -50,3 +50,16 @@ class AbstractModel(eqx.Module):
         compilation at trace time. Default: None (detect)."""
         del effects
         return None
+
+    def stage_jacobians(self, effects) -> bool:
+        """Whether an implicit Runge-Kutta step (Kvaerno) should take a fresh
+        Jacobian at each implicit stage's predictor rather than one per step.
+
+        True where the stiff forces turn with the state, so that a Jacobian from
+        the step's first stage no longer contracts the later stages' Newton
+        iterations (stiff springs between moving nodes: the displacement string,
+        the lumped-mass tether). False (the default) where the stiff part is
+        (nearly) linear in the state, as in natural variables, where the extra
+        factorisations would only cost time."""
+        del effects
+        return False

@@ -110,6 +110,39 @@ def _to_y_units(diff, y_new, args):
     return diff, y_new
 
 
+def _explicit_stage(args) -> bool:
+    """Whether `args` are diffrax's ESDIRK f-space stage arguments with a diagonal
+    that is the constant 0 (an explicit stage)."""
+    if not (isinstance(args, tuple) and len(args) in (7, 8)):
+        return False
+    diagonal = args[1]
+    if isinstance(diagonal, jax.core.Tracer) or not hasattr(diagonal, "shape"):
+        return False
+    return diagonal.shape == () and bool(diagonal == 0)
+
+
+def _identity_like(struct):
+    """The factorisation of the identity with the structure `struct` (from
+    `eqx.filter_eval_shape` of a factorisation): LU factors and the inverse diagonal
+    blocks of block cyclic reduction are identity matrices, pivots are 0, 1, ...,
+    and every other array (the reduction's off-diagonal blocks) is zero."""
+
+    def fill(path, leaf):
+        if not isinstance(leaf, jax.ShapeDtypeStruct):
+            return leaf
+        name = getattr(path[-1], "name", "") if path else ""
+        if name in ("lu", "dinv", "dinv_last"):
+            eye = jnp.eye(leaf.shape[-1], dtype=leaf.dtype)
+            return jnp.broadcast_to(eye, leaf.shape)
+        if name == "piv":
+            return jnp.broadcast_to(
+                jnp.arange(leaf.shape[-1], dtype=leaf.dtype), leaf.shape
+            )
+        return jnp.zeros(leaf.shape, leaf.dtype)
+
+    return jtu.tree_map_with_path(fill, struct)
+
+
 def _rms(tree):
     leaves = jtu.tree_leaves(tree)
     sq = sum(jnp.sum(jnp.abs(x) ** 2) for x in leaves)
@@ -176,8 +209,15 @@ class StageNewton(optx.AbstractRootFinder):
             return init_state
         leaves = jtu.tree_leaves(y)
         dtype = jnp.result_type(*leaves) if leaves else jnp.float64
+        if _explicit_stage(args):
+            # diffrax's ESDIRKs ask, once per step, for the "Jacobian" of their
+            # explicit first stage (diagonal 0: the relation's Jacobian is I). It is
+            # never used to solve, so build the identity factor, not a Jacobian.
+            fac = _identity_like(eqx.filter_eval_shape(self._factor, fn, y, args))
+        else:
+            fac = self._factor(fn, y, args)
         return _StageState(
-            linear_state=self._factor(fn, y, args),
+            linear_state=fac,
             diffsize=jnp.array(jnp.inf, dtype=dtype),
             diffsize_prev=jnp.array(1.0, dtype=dtype),
             result=optx.RESULTS.successful,

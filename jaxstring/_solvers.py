@@ -1,6 +1,9 @@
 """Solvers by name: diffrax methods with jaxstring's stage Newton iteration."""
 
+from typing import ClassVar
+
 import diffrax as dfx
+from diffrax._solver.runge_kutta import CalculateJacobian
 
 from ._bdf import BDF
 from ._fixed_step import Newmark, ThetaMethod
@@ -52,6 +55,51 @@ SOLVERS = {
 _MAX_ITERS_ADAPTIVE = 10
 
 
+# diffrax's ESDIRKs take one Jacobian per step, at the predictor of their first
+# implicit stage, and start every later stage's Newton iteration from it. On the
+# displacement string that Jacobian is stale by the next stage (the stiff axis turns
+# with the string), so each stage refreshed it at its own iterate, and the refreshed
+# Jacobian was dropped at the end of the stage (diffrax carries the step's first
+# one): Kvaerno5 at k = 40 made 12-15 factorisations per attempted step at
+# EA = 1e6 and 1e9. Taking the Jacobian at each stage's own predictor instead
+# (diffrax's `every_stage`, as for DIRK methods) costs one factorisation per stage
+# and converges from there: at EA = 1e9 Kvaerno5 went from 8930 accepted steps in
+# 6.0 s to 3471 in 1.66 s (0.73x CVODE; bench_solvers_stagejac.md); its step size
+# had been held down by Newton failures. In natural variables, whose stiff force is
+# linear in the state, the step's Jacobian serves every stage and the extra ones
+# only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
+# the model chooses (`AbstractModel.stage_jacobians`).
+class Kvaerno3(dfx.Kvaerno3):
+    """diffrax's Kvaerno3 with a Jacobian at every implicit stage's predictor."""
+
+    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+
+
+class Kvaerno4(dfx.Kvaerno4):
+    """diffrax's Kvaerno4 with a Jacobian at every implicit stage's predictor."""
+
+    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+
+
+class Kvaerno5(dfx.Kvaerno5):
+    """diffrax's Kvaerno5 with a Jacobian at every implicit stage's predictor."""
+
+    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+
+
+KVAERNO = {"kvaerno3": Kvaerno3, "kvaerno4": Kvaerno4, "kvaerno5": Kvaerno5}
+KVAERNO_STEP_JACOBIAN = {
+    "kvaerno3": dfx.Kvaerno3,
+    "kvaerno4": dfx.Kvaerno4,
+    "kvaerno5": dfx.Kvaerno5,
+}
+
+
+def kvaerno_class(name: str, stage_jacobians: bool):
+    """The Kvaerno solver class for a name: a Jacobian per stage or per step."""
+    return (KVAERNO if stage_jacobians else KVAERNO_STEP_JACOBIAN)[name]
+
+
 def check_solver(solver) -> None:
     if isinstance(solver, dfx.AbstractSolver):
         return
@@ -64,19 +112,19 @@ def is_adaptive(solver) -> bool:
     return SOLVERS[solver][1]
 
 
-def build_solver(solver, newton_rtol, newton_atol):
-    """Return a diffrax solver for a name (tolerances may be traced arrays)."""
+def build_solver(solver, newton_rtol, newton_atol, stage_jacobians=False):
+    """Return a diffrax solver for a name (tolerances may be traced arrays).
+    `stage_jacobians`: Kvaerno takes a Jacobian at every implicit stage (the
+    scene's `model.stage_jacobians(effects)`)."""
     if isinstance(solver, dfx.AbstractSolver):
         return solver
     chord = StageNewton(
         rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_ADAPTIVE
     )
-    if solver == "kvaerno3":
-        return dfx.Kvaerno3(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
-    if solver == "kvaerno4":
-        return dfx.Kvaerno4(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
-    if solver == "kvaerno5":
-        return dfx.Kvaerno5(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
+    if solver in KVAERNO:
+        return kvaerno_class(solver, stage_jacobians)(
+            root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
+        )
     if solver == "implicit_euler":
         return dfx.ImplicitEuler(
             root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE

@@ -211,6 +211,12 @@ class DisplacementString(AbstractString):
     def tension_weights(self):
         return jnp.full((self.k,), self.l / self.k)
 
+    def stage_jacobians(self, effects):
+        """True: the stiff axial force N = EA (|D r| - 1) t turns with the string, so
+        a Kvaerno step takes a Jacobian at each stage (`AbstractModel`)."""
+        del effects
+        return True
+
     def vector_field(self, t, y, effects):
         loads, laws = split_effects(effects)
         kin = self.kinematics(y)

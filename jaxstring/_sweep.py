@@ -87,7 +87,7 @@ from ._projection import ProjectedSolver
 from ._root_finder import StageNewton
 from ._scene import Scene
 from ._simulate import observables
-from ._solvers import _MAX_ITERS_ADAPTIVE
+from ._solvers import _MAX_ITERS_ADAPTIVE, KVAERNO_STEP_JACOBIAN, kvaerno_class
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int
 
@@ -195,9 +195,7 @@ def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
 
 
 LOCKSTEP_SOLVERS = {
-    "kvaerno3": dfx.Kvaerno3,
-    "kvaerno4": dfx.Kvaerno4,
-    "kvaerno5": dfx.Kvaerno5,
+    **KVAERNO_STEP_JACOBIAN,
     "implicit_euler": dfx.ImplicitEuler,
     "tsit5": dfx.Tsit5,
     "dopri5": dfx.Dopri5,
@@ -281,7 +279,7 @@ class _FlatBatch(eqx.Module):
 LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
 
 
-def _lockstep_solver(config):
+def _lockstep_solver(config, scene):
     name = config.solver
     if name in LOCKSTEP_FIXED:
         nr = config.rtol if config.newton_rtol is None else config.newton_rtol
@@ -292,6 +290,8 @@ def _lockstep_solver(config):
             atol=jnp.asarray(na, dtype=jnp.float64),
         )
     cls = LOCKSTEP_SOLVERS[name]
+    if name in KVAERNO_STEP_JACOBIAN:
+        cls = kvaerno_class(name, scene.model.stage_jacobians(scene.effects))
     if cls in (dfx.Tsit5, dfx.Dopri5):
         return cls()
     nr = config.rtol if config.newton_rtol is None else config.newton_rtol
@@ -337,7 +337,7 @@ def _lockstep(vals, scene, getters, fn, config, ts):
     batch = _Batch(vals, scene, getters)
     n = vals[0].shape[0]
     y0 = jnp.broadcast_to(scene.y0, (n,) + jnp.shape(scene.y0))
-    solver = _lockstep_solver(config)
+    solver = _lockstep_solver(config, scene)
     fixed = False
     dt0 = config.dt0
     args = batch
