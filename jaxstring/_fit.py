@@ -186,12 +186,7 @@ def _solve_adjoint(
 ):
     # A copy of jaxstring._simulate._solve with an `adjoint` argument (and no progress
     # meter); used only for non-default adjoints until `_solve` takes `adjoint=`.
-    dfx_solver = build_solver(
-        solver,
-        newton_rtol,
-        newton_atol,
-        stage_jacobians=scene.model.stage_jacobians(scene.effects),
-    )
+    dfx_solver = build_solver(solver, newton_rtol, newton_atol, scene)
     if project and scene.model.projects:
         # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
         # differentiate in forward mode / with DirectAdjoint, but cannot see through

@@ -37,12 +37,7 @@ def _solve(
     step_control="auto",
 ):
     term = dfx.ODETerm(scene_vector_field)
-    dfx_solver = build_solver(
-        solver,
-        newton_rtol,
-        newton_atol,
-        stage_jacobians=scene.model.stage_jacobians(scene.effects),
-    )
+    dfx_solver = build_solver(solver, newton_rtol, newton_atol, scene)
     if project and scene.model.projects:
         dfx_solver = ProjectedSolver(dfx_solver)
         saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))

@@ -64,7 +64,7 @@ _MAX_ITERS_ADAPTIVE = 10
 # EA = 1e6 and 1e9. Taking the Jacobian at each stage's own predictor instead
 # (diffrax's `every_stage`, as for DIRK methods) costs one factorisation per stage
 # and converges from there: at EA = 1e9 Kvaerno5 went from 8930 accepted steps in
-# 6.0 s to 3471 in 1.66 s (0.73x CVODE; bench_solvers_stagejac.md); its step size
+# 6.0 s to 3471 in 1.63 s (0.80x CVODE; bench_solvers_stagejac.md); its step size
 # had been held down by Newton failures. In natural variables, whose stiff force is
 # linear in the state, the step's Jacobian serves every stage and the extra ones
 # only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
@@ -95,9 +95,11 @@ KVAERNO_STEP_JACOBIAN = {
 }
 
 
-def kvaerno_class(name: str, stage_jacobians: bool):
-    """The Kvaerno solver class for a name: a Jacobian per stage or per step."""
-    return (KVAERNO if stage_jacobians else KVAERNO_STEP_JACOBIAN)[name]
+def kvaerno_class(name: str, scene):
+    """The Kvaerno solver class for a name: a Jacobian per stage or per step, as
+    the scene's model asks (`AbstractModel.stage_jacobians`)."""
+    per_stage = scene.model.stage_jacobians(scene.effects)
+    return (KVAERNO if per_stage else KVAERNO_STEP_JACOBIAN)[name]
 
 
 def check_solver(solver) -> None:
@@ -112,17 +114,16 @@ def is_adaptive(solver) -> bool:
     return SOLVERS[solver][1]
 
 
-def build_solver(solver, newton_rtol, newton_atol, stage_jacobians=False):
-    """Return a diffrax solver for a name (tolerances may be traced arrays).
-    `stage_jacobians`: Kvaerno takes a Jacobian at every implicit stage (the
-    scene's `model.stage_jacobians(effects)`)."""
+def build_solver(solver, newton_rtol, newton_atol, scene):
+    """Return a diffrax solver for a name (tolerances may be traced arrays) and a
+    scene (whose model chooses Kvaerno's Jacobian per stage or per step)."""
     if isinstance(solver, dfx.AbstractSolver):
         return solver
     chord = StageNewton(
         rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_ADAPTIVE
     )
     if solver in KVAERNO:
-        return kvaerno_class(solver, stage_jacobians)(
+        return kvaerno_class(solver, scene)(
             root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
         )
     if solver == "implicit_euler":

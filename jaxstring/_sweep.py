@@ -87,7 +87,7 @@ from ._projection import ProjectedSolver
 from ._root_finder import StageNewton
 from ._scene import Scene
 from ._simulate import observables
-from ._solvers import _MAX_ITERS_ADAPTIVE, KVAERNO_STEP_JACOBIAN, kvaerno_class
+from ._solvers import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int
 
@@ -195,7 +195,7 @@ def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
 
 
 LOCKSTEP_SOLVERS = {
-    **KVAERNO_STEP_JACOBIAN,
+    **KVAERNO,  # the class per scene: kvaerno_class
     "implicit_euler": dfx.ImplicitEuler,
     "tsit5": dfx.Tsit5,
     "dopri5": dfx.Dopri5,
@@ -289,9 +289,10 @@ def _lockstep_solver(config, scene):
             rtol=jnp.asarray(nr, dtype=jnp.float64),
             atol=jnp.asarray(na, dtype=jnp.float64),
         )
-    cls = LOCKSTEP_SOLVERS[name]
-    if name in KVAERNO_STEP_JACOBIAN:
-        cls = kvaerno_class(name, scene.model.stage_jacobians(scene.effects))
+    if name in KVAERNO:
+        cls = kvaerno_class(name, scene)
+    else:
+        cls = LOCKSTEP_SOLVERS[name]
     if cls in (dfx.Tsit5, dfx.Dopri5):
         return cls()
     nr = config.rtol if config.newton_rtol is None else config.newton_rtol

@@ -271,6 +271,16 @@ def test_fixed_step_paper_setting_runs(solver):
     assert _err(traj, ref) < 2e-2, _err(traj, ref)
 
 
+def _kvaerno5(scene, ts, cls=dfx.Kvaerno5, **newton_kw):
+    """A successful solve at rtol = atol = 1e-6 by Kvaerno5 `cls` (diffrax's, one
+    Jacobian per step, unless given) with a StageNewton of `newton_kw`."""
+    rf = StageNewton(rtol=1e-6, atol=1e-6, **newton_kw)
+    solver = cls(root_finder=rf, root_find_max_steps=10)
+    traj = js.simulate(scene, solver, rtol=1e-6, atol=1e-6, ts=ts)
+    assert traj.ok, traj.status
+    return traj
+
+
 def test_newton_refresh_removes_displacement_rejections():
     # Displacement variables at EA = 1e9: a Jacobian frozen at the stage predictor
     # contracts at a rate near 1 (the stiff axial force turns with the string), so
@@ -278,12 +288,7 @@ def test_newton_refresh_removes_displacement_rejections():
     # iterate removes most attempts, at the same answer.
     scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
-    runs = {}
-    for refresh in (False, True):
-        rf = StageNewton(rtol=1e-6, atol=1e-6, refresh=refresh)
-        solver = dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
-        runs[refresh] = js.simulate(scene, solver, rtol=1e-6, atol=1e-6, ts=ts)
-    assert runs[False].ok and runs[True].ok
+    runs = {r: _kvaerno5(scene, ts, refresh=r) for r in (False, True)}
     attempts = {r: int(t.stats["num_steps"]) for r, t in runs.items()}
     assert attempts[True] * 5 < attempts[False], attempts
     assert _err(runs[True], runs[False]) < 1e-5
@@ -298,15 +303,10 @@ def test_refresh_before_predicted_divergence():
     # bench_solvers_refresh.md), the same answer.
     scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
-    runs = {}
-    for name, kw in (
-        ("old", dict(refresh_when_hopeless=False, max_jacobians=3)),
-        ("new", {}),
-    ):
-        rf = StageNewton(rtol=1e-6, atol=1e-6, **kw)
-        solver = dfx.Kvaerno5(root_finder=rf, root_find_max_steps=10)
-        runs[name] = js.simulate(scene, solver, rtol=1e-6, atol=1e-6, ts=ts)
-        assert runs[name].ok, runs[name].status
+    runs = {
+        "old": _kvaerno5(scene, ts, refresh_when_hopeless=False, max_jacobians=3),
+        "new": _kvaerno5(scene, ts),
+    }
     attempts = {n: int(t.stats["num_steps"]) for n, t in runs.items()}
     assert 2 * attempts["new"] < attempts["old"], attempts
     ref = js.simulate(scene, "rodas5p", rtol=1e-11, atol=1e-11, ts=ts)
@@ -322,12 +322,10 @@ def test_stage_jacobians_cut_kvaerno5_attempts():
     # k = 40, 2 s: 9757 -> 3797 attempts, bench_solvers_stagejac.md).
     scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
-    runs = {}
-    for name, cls in (("step", dfx.Kvaerno5), ("stage", js.Kvaerno5)):
-        rf = StageNewton(rtol=1e-6, atol=1e-6)
-        solver = cls(root_finder=rf, root_find_max_steps=10)
-        runs[name] = js.simulate(scene, solver, rtol=1e-6, atol=1e-6, ts=ts)
-        assert runs[name].ok, runs[name].status
+    runs = {
+        "step": _kvaerno5(scene, ts, cls=dfx.Kvaerno5),
+        "stage": _kvaerno5(scene, ts, cls=js.Kvaerno5),
+    }
     attempts = {n: int(t.stats["num_steps"]) for n, t in runs.items()}
     assert 3 * attempts["stage"] < attempts["step"], attempts
     ref = js.simulate(scene, "rodas5p", rtol=1e-11, atol=1e-11, ts=ts)
