@@ -218,7 +218,8 @@ class BDF(dfx.AbstractAdaptiveSolver):
     def _jacobian(self, terms, t, y, args, width):
         fn = lambda u: terms.vf(t, u, args)
         _, lin = jax.linearize(fn, y)
-        return lax.stop_gradient(_linalg.jacobian(fn, y, width, lin))
+        so = _linalg.declared_second_order(_VF(), y, (t, terms, args))
+        return lax.stop_gradient(_linalg.jacobian(fn, y, width, lin, so))
 
     def _start(self, terms, t0, h, y0, args):
         f0 = terms.vf(t0, y0, args)

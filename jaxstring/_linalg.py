@@ -22,6 +22,11 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   but not across blocks: fine for the Newton matrices ``I - h gamma J`` of
   mechanical chains, whose reduced matrices are (scaled) symmetric positive
   definite; ``tests/test_fast_solvers.py`` checks it against the dense solve.
+* ``SecondOrderFactor``: for a model whose node rows are (q, v) with dq/dt = v
+  exactly (declared by ``AbstractModel.second_order``), the Newton matrix
+  ``[[a I, b I], [P, Q]]`` is reduced to the velocity unknowns,
+  ``S = Q - (b / a) P``: blocks of half the size, 8x fewer block flops and a
+  closed-form 2 x 2 inverse in 2D.
 * ``NewtonFactor``: one interface (``build(fn, y, structure)`` and ``.solve``)
   over the dense and the banded paths, used by the stage Newton iteration, the
   Rosenbrock, BDF, theta and Newmark solvers.
@@ -220,6 +225,9 @@ class BlockTridiagonal(eqx.Module):
     n: int = eqx.field(static=True)
     b: int = eqx.field(static=True)
     width: int = eqx.field(static=True)
+    # d > 0: node rows are (q, v), d components each, and the matrix is
+    # a I + b J of a vector field with dq/dt = v (see `SecondOrderFactor`).
+    second_order: int = eqx.field(static=True, default=0)
 
     def _pad(self, x):
         N, B = self.diag.shape[0], self.diag.shape[1]
@@ -250,7 +258,13 @@ class BlockTridiagonal(eqx.Module):
         # keep padded unknowns decoupled with unit diagonal
         diag = jnp.where(pad_mask, eye, diag)
         return BlockTridiagonal(
-            beta * self.lower, diag, beta * self.upper, self.n, self.b, self.width
+            beta * self.lower,
+            diag,
+            beta * self.upper,
+            self.n,
+            self.b,
+            self.width,
+            self.second_order,
         )
 
     def _pad_mask(self):
@@ -273,12 +287,15 @@ class BlockTridiagonal(eqx.Module):
         return M[:m, :m]
 
 
-def block_tridiagonal_jacobian(fn, y, width: int, linear_fn=None) -> BlockTridiagonal:
+def block_tridiagonal_jacobian(
+    fn, y, width: int, linear_fn=None, second_order: int = 0
+) -> BlockTridiagonal:
     """Jacobian of `fn` at `y` (node-major `(n, b)`) as a block-tridiagonal matrix of
     `width`-node super-blocks, from 3 B JVPs (B = width * b).
 
     `linear_fn`, if given, is the JVP `v -> J v` (e.g. from `jax.linearize`), so
-    that a caller that already linearised does not do it again.
+    that a caller that already linearised does not do it again. `second_order`
+    (d > 0, with `width` 1 and b = 2 d) marks the (q, v) node layout for `factor`.
     """
     n, b = y.shape
     B = width * b
@@ -315,7 +332,8 @@ def block_tridiagonal_jacobian(fn, y, width: int, linear_fn=None) -> BlockTridia
     if not real.all():
         pad_eye = np.eye(B)[None] * (~real.reshape(N, B))[:, :, None]
         diag = diag + jnp.asarray(pad_eye, diag.dtype)
-    return BlockTridiagonal(lower, diag, upper, n, b, width)
+    d = second_order if (width == 1 and b == 2 * second_order) else 0
+    return BlockTridiagonal(lower, diag, upper, n, b, width, d)
 
 
 # ----------------------------------------------------------------------------
@@ -369,6 +387,15 @@ def small_inv(a):
     fuses) are several times faster.
     """
     B = a.shape[-1]
+    if B == 1:
+        return 1.0 / a
+    if B == 2:
+        # Closed form (the adjugate over the determinant): a handful of fused
+        # elementwise ops instead of an unrolled elimination.
+        p, q, r, s = a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1]
+        det = p * s - q * r
+        adj = jnp.stack([jnp.stack([s, -q], -1), jnp.stack([-r, p], -1)], -2)
+        return adj / det[..., None, None]
     eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype), a.shape)
     m = jnp.concatenate([a, eye], axis=-1)  # (..., B, 2B)
     rows = jnp.arange(B)
@@ -475,18 +502,100 @@ class BandedFactor(eqx.Module):
         return x.reshape(-1)[: self.n * self.b].reshape(self.n, self.b)
 
 
-def jacobian(fn, y, width, linear_fn=None):
-    """Jacobian of `fn` at `y`: `BlockTridiagonal` if `width` is an int, else dense."""
+class SecondOrderFactor(eqx.Module):
+    """Factorisation of a block-tridiagonal Newton matrix `a I + b J` of a vector
+    field whose node rows are (q, v) with dq/dt = v exactly (d components each).
+
+    Its q rows are `a p_i + b q_i = r_i` (no coupling between nodes), so
+    `p = (r - b q) / a` and the v rows become, on the velocities alone,
+    `(Q - P diag(b / a)) q = s - P (r / a)` with P, Q the v rows' q and v columns:
+    block-tridiagonal with d x d blocks, factorised by block cyclic reduction. This
+    is the classical reduction of the Newton system of a second-order ODE (Hairer
+    & Wanner, IV.8); for a 2D string it halves the block size, so the reduction's
+    block products cost 8x fewer flops and the block inverses are closed-form.
+
+    The q rows' structure is checked on the values: if they are not
+    `[a I, b I]` with no neighbour coupling (a model that declared `second_order`
+    wrongly, or a relation that is not `a I + b J`), the factor is NaN, so the
+    Newton iteration fails loudly instead of converging to a wrong root.
+    """
+
+    sfac: BCRFactor
+    p: BlockTridiagonal  # the v rows' q columns, d x d blocks
+    inv_alpha: Array  # (n,): 1 / a
+    ratio: Array  # (n,): b / a
+
+    def solve(self, rhs):
+        d = self.p.b
+        r, s = rhs[:, :d], rhs[:, d:]
+        rq = s - self.p.matvec(r * self.inv_alpha[:, None])
+        q = bcr_solve(self.sfac, rq)
+        p = r * self.inv_alpha[:, None] - self.ratio[:, None] * q
+        return jnp.concatenate([p, q], axis=1)
+
+
+def second_order_factor(mat: BlockTridiagonal) -> SecondOrderFactor:
+    """`SecondOrderFactor` of a `BlockTridiagonal` with `second_order` = d > 0."""
+    d, n = mat.second_order, mat.n
+    qd = mat.diag[:, :d, :]  # the q rows of the diagonal blocks, (n, d, 2d)
+    alpha, beta = qd[:, 0, 0], qd[:, 0, d]
+    eye = jnp.eye(d, dtype=mat.diag.dtype)
+    expect = jnp.concatenate(
+        [alpha[:, None, None] * eye, beta[:, None, None] * eye], axis=-1
+    )
+    off = jnp.max(jnp.abs(mat.lower[:, :d, :])) + jnp.max(jnp.abs(mat.upper[:, :d, :]))
+    ok = (off == 0) & jnp.all(qd == expect) & jnp.all(alpha != 0)
+    inv_alpha = jnp.where(ok, 1.0 / jnp.where(alpha != 0, alpha, 1.0), jnp.nan)
+    ratio = beta * inv_alpha
+    v_rows = lambda m, lo, hi: m[:, d:, lo:hi]
+    P = [v_rows(m, 0, d) for m in (mat.lower, mat.diag, mat.upper)]
+    Q = [v_rows(m, d, 2 * d) for m in (mat.lower, mat.diag, mat.upper)]
+    # S_ij = Q_ij - P_ij (b / a)_j: column scaling by the ratio of node j.
+    zero = jnp.zeros_like(ratio[:1])
+    r_prev = jnp.concatenate([zero, ratio[:-1]])
+    r_next = jnp.concatenate([ratio[1:], zero])
+    S = BlockTridiagonal(
+        Q[0] - P[0] * r_prev[:, None, None],
+        Q[1] - P[1] * ratio[:, None, None],
+        Q[2] - P[2] * r_next[:, None, None],
+        n,
+        d,
+        1,
+    )
+    return SecondOrderFactor(
+        bcr_factor(S), BlockTridiagonal(*P, n, d, 1), inv_alpha, ratio
+    )
+
+
+def declared_second_order(fn, y, args=None) -> int:
+    """d > 0 when the scene's model (found as in `declared_width`) declares the
+    (q, v) node layout with dq/dt = v (`AbstractModel.second_order`) and `y` has
+    the scene's state shape; else 0."""
+    if not (hasattr(y, "shape") and len(y.shape) == 2):
+        return 0
+    is_scene = lambda x: isinstance(x, Scene)
+    scenes = [x for x in jtu.tree_leaves((fn, args), is_leaf=is_scene) if is_scene(x)]
+    if len(scenes) != 1 or tuple(np.shape(scenes[0].y0)) != tuple(y.shape):
+        return 0
+    return int(scenes[0].model.second_order(scenes[0].effects))
+
+
+def jacobian(fn, y, width, linear_fn=None, second_order=0):
+    """Jacobian of `fn` at `y`: `BlockTridiagonal` if `width` is an int, else dense.
+    `second_order` > 0 (from `declared_second_order`) selects the reduced
+    factorisation of `SecondOrderFactor` for the matrices built from it."""
     if width is None:
         flat, unravel = jfu.ravel_pytree(y)
         f_flat = lambda v: jfu.ravel_pytree(fn(unravel(v)))[0]
         return DenseJacobian(jax.jacfwd(f_flat)(flat))
-    return block_tridiagonal_jacobian(fn, y, width, linear_fn)
+    return block_tridiagonal_jacobian(fn, y, width, linear_fn, second_order)
 
 
 def factor(mat):
     """Factorise a `DenseJacobian`-like or `BlockTridiagonal` matrix."""
     if isinstance(mat, BlockTridiagonal):
+        if mat.second_order:
+            return second_order_factor(mat)
         N, B = mat.diag.shape[0], mat.diag.shape[1]
         return BandedFactor(bcr_factor(mat), mat.n, mat.b, N, B)
     lu, piv = jsl.lu_factor(mat.matrix)

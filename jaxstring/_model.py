@@ -51,6 +51,15 @@ class AbstractModel(eqx.Module):
         del effects
         return None
 
+    def second_order(self, effects) -> int:
+        """d > 0 if every node row of the state is (q, v), d components each, and
+        `vector_field` returns exactly v as dq/dt under `effects`. The implicit
+        solvers then reduce each banded Newton system to the velocities
+        (`jaxstring._linalg.SecondOrderFactor`: blocks of d instead of 2 d).
+        Default: 0 (no such layout)."""
+        del effects
+        return 0
+
     def stage_jacobians(self, effects) -> bool:
         """Whether an implicit Runge-Kutta step (Kvaerno) should take a fresh
         Jacobian at each implicit stage's predictor rather than one per step.

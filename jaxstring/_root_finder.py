@@ -124,13 +124,16 @@ def _explicit_stage(args) -> bool:
 def _identity_like(struct):
     """The factorisation of the identity with the structure `struct` (from
     `eqx.filter_eval_shape` of a factorisation): LU factors and the inverse diagonal
-    blocks of block cyclic reduction are identity matrices, pivots are 0, 1, ...,
+    blocks of block cyclic reduction are identity matrices (and 1 / a of a
+    `SecondOrderFactor` is 1), pivots are 0, 1, ...,
     and every other array (the reduction's off-diagonal blocks) is zero."""
 
     def fill(path, leaf):
         if not isinstance(leaf, jax.ShapeDtypeStruct):
             return leaf
         name = getattr(path[-1], "name", "") if path else ""
+        if name == "inv_alpha":
+            return jnp.ones(leaf.shape, leaf.dtype)
         if name in ("lu", "dinv", "dinv_last"):
             eye = jnp.eye(leaf.shape[-1], dtype=leaf.dtype)
             return jnp.broadcast_to(eye, leaf.shape)
@@ -198,7 +201,8 @@ class StageNewton(optx.AbstractRootFinder):
             fac = batched_factor(noaux, y, args, self.linear_solver)
             return lax.stop_gradient(fac)
         width = _linalg.choose_structure(noaux, y, args, self.linear_solver)
-        jac = _linalg.jacobian(lambda u: noaux(u, args), y, width)
+        so = _linalg.declared_second_order(noaux, y, args)
+        jac = _linalg.jacobian(lambda u: noaux(u, args), y, width, second_order=so)
         fac = _linalg.factor(jac)
         return lax.stop_gradient(fac)
 

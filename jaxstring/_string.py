@@ -211,6 +211,12 @@ class DisplacementString(AbstractString):
     def tension_weights(self):
         return jnp.full((self.k,), self.l / self.k)
 
+    def second_order(self, effects):
+        """`dim`: rows are (r_i, r_i') and `vector_field` returns r_i' as dr_i/dt
+        (`AbstractModel.second_order`)."""
+        del effects
+        return self.dim
+
     def stage_jacobians(self, effects):
         """True: the stiff axial force N = EA (|D r| - 1) t turns with the string, so
         a Kvaerno step takes a Jacobian at each stage (`AbstractModel`)."""

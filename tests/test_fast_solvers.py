@@ -332,15 +332,17 @@ def test_stage_jacobians_cut_kvaerno5_attempts():
     assert _err(runs["stage"], ref) < 1e-5
 
 
-@pytest.mark.parametrize("banded", (False, True))
-def test_identity_factor_of_the_explicit_stage(banded):
+@pytest.mark.parametrize("structure", ("dense", "banded", "reduced"))
+def test_identity_factor_of_the_explicit_stage(structure):
     # The explicit first stage of an ESDIRK gets the identity factor (no Jacobian):
     # it must solve as the identity, with the structure of a real factorisation.
     from jaxstring._root_finder import _identity_like
 
     fn, y, scene = _string_vf("displacement", 16)
-    width = 1 if banded else None
-    real = _linalg.factor(_linalg.jacobian(lambda u: fn(u, scene), y, width))
+    width = None if structure == "dense" else 1
+    so = 2 if structure == "reduced" else 0
+    jac = _linalg.jacobian(lambda u: fn(u, scene), y, width, second_order=so)
+    real = _linalg.factor(jac.scale_shift(1.0, -1e-3))
     ident = _identity_like(jax.eval_shape(lambda: real))
     assert jax.tree.structure(ident) == jax.tree.structure(real)
     rhs = jnp.asarray(np.random.default_rng(2).standard_normal(y.shape))
@@ -375,3 +377,88 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
     assert _linalg.detect_width(vf, scene.y0, scene) == declared
     # Not for a state of another shape (e.g. Newmark's accelerations).
     assert _linalg.declared_width(vf, scene.y0[:, :2], scene) is None
+
+
+# ---------------------------------------------------------------------------
+# The reduced Newton system of a second-order model (q, v rows, dq/dt = v)
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dim", (2, 3))
+@pytest.mark.parametrize("a, b", [(1.0, -1e-3), (1.0, -0.1), (100.0, -1.0)])
+def test_second_order_factor_equals_dense_solve(dim, a, b):
+    # a I + b J as BDF (a = 1, b = -c) and Rodas5P (a = 1 / (h gamma), b = -1) form
+    # it: the velocity-reduced solve must equal the dense one. The reduced matrix is
+    # far better scaled than the full one (no metres next to metres per second), so
+    # the agreement is much tighter than the full system's 1e-8 above.
+    scene = js.scenes.string_pendulum(
+        k=11, dim=dim, EA=1e6, effects=("gravity", "kelvin_voigt", "slack")
+    )
+    rng = np.random.default_rng(dim)
+    y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
+    fn = lambda u: scene.vector_field(0.0, u)
+    assert scene.model.second_order(scene.effects) == dim
+    fac = _linalg.factor(_linalg.jacobian(fn, y, 1, second_order=dim).scale_shift(a, b))
+    assert isinstance(fac, _linalg.SecondOrderFactor)
+    assert fac.sfac.dinv_last.shape == (dim, dim)  # d x d blocks, not 2d x 2d
+    n = y.size
+    J = np.asarray(
+        jax.jacfwd(lambda v: fn(v.reshape(y.shape)).reshape(-1))(y.reshape(-1))
+    )
+    rhs = rng.standard_normal(y.shape)
+    dense = np.linalg.solve(a * np.eye(n) + b * J, rhs.reshape(-1))
+    x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+    assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-11
+
+
+def test_declared_second_order_matches_the_jacobian():
+    # DisplacementString declares rows (r, r') with dr/dt = r' exactly: the q rows
+    # of its Jacobian are [0, I] and touch no other node, with every effect on.
+    scene = js.scenes.string_pendulum(
+        k=7, dim=2, effects=("gravity", "kelvin_voigt", "slack")
+    )
+    y = scene.y0 + 0.01
+    n, b = y.shape
+    J = np.asarray(
+        jax.jacfwd(lambda v: scene.vector_field(0.3, v.reshape(n, b)).reshape(-1))(
+            y.reshape(-1)
+        )
+    ).reshape(n, b, n, b)
+    expect = np.zeros((n, 2, n, b))
+    for i in range(n):
+        expect[i, :, i, 2:] = np.eye(2)
+    assert np.array_equal(J[:, :2], expect)
+    # The natural variables declare nothing.
+    nat = js.scenes.string_pendulum("angle", k=7)
+    assert nat.model.second_order(nat.effects) == 0
+
+
+def test_second_order_factor_refuses_a_wrong_structure():
+    # A relation whose q rows couple nodes (not a I + b J of dq/dt = v) gives a NaN
+    # factor, so the Newton iteration fails instead of converging to a wrong root.
+    scene = js.scenes.string_pendulum(k=9)
+    fn = lambda u: scene.vector_field(0.0, u) + 0.1 * jnp.roll(u, 1, axis=0)
+    y = scene.y0 + 0.01
+    fac = _linalg.factor(
+        _linalg.jacobian(fn, y, 1, second_order=2).scale_shift(1, -0.1)
+    )
+    assert np.all(np.isnan(np.asarray(fac.solve(jnp.ones_like(y)))))
+
+
+def test_closed_form_2x2_inverse():
+    a = np.random.default_rng(3).standard_normal((50, 2, 2))
+    err = np.max(np.abs(np.asarray(_linalg.small_inv(a)) - np.linalg.inv(a)))
+    assert err < 1e-10, err
+
+
+def test_ynnpack_fusions_are_off():
+    # jaxstring turns XLA:CPU's YNNPACK fusions off on the jaxlib where they made
+    # the coloured Jacobian 3-4x slower (experiments/results/ynn_fusion.md): a
+    # compiled batched reduction must then contain no YNNPACK fusion.
+    from jaxstring import _config
+
+    if _config.XLA_FLAGS_SET_BY != "XLA_FLAGS":
+        pytest.skip(f"flag not set by jaxstring: {_config.XLA_FLAGS_SET_BY}")
+    f = jax.jit(lambda x: jnp.sum(x * x[:, ::-1], axis=-1))
+    hlo = f.lower(jnp.ones((12, 640, 2))).compile().as_text()
+    assert "ynn" not in hlo.lower()
