@@ -283,3 +283,49 @@ def test_moordyn_pendulum_stability_guard():
         assert traj.ok, (tol, traj.status, traj.stats)
         err = float(jnp.max(jnp.linalg.norm(traj.end_mass - ref.end_mass, axis=-1)))
         assert err < bound, (tol, err)
+
+
+def _final_refresh_count(formulation, skip_after):
+    """BDF on the k = 8 pendulum through diffrax, returning the end state and the
+    solver's count of accepted steps in a row that needed a fresh Jacobian."""
+    from jaxstring import _bdf
+    from jaxstring._simulate import scene_vector_field
+
+    scene = js.scenes.string_pendulum(formulation, k=8, EA=1e6, t1=0.3)
+    old = _bdf._SKIP_STORED_AFTER
+    _bdf._SKIP_STORED_AFTER = skip_after  # read at trace time
+    try:
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(scene_vector_field),
+            BDF(rtol=1e-7, atol=1e-7),
+            0.0,
+            0.3,
+            None,
+            scene.y0,
+            args=scene,
+            stepsize_controller=dfx.PIDController(rtol=1e-7, atol=1e-7),
+            saveat=dfx.SaveAt(t1=True, solver_state=True),
+            max_steps=20_000,
+        )
+    finally:
+        _bdf._SKIP_STORED_AFTER = old
+    assert sol.result == dfx.RESULTS.successful
+    return (
+        np.asarray(sol.ys[-1]),
+        int(np.ravel(sol.solver_state.n_refresh)[-1]),
+        sol.stats,
+    )
+
+
+def test_stored_jacobian_skipped_only_where_it_keeps_failing():
+    # Displacement variables: the springs turn with the string, so the stored
+    # Jacobian nearly never contracts the Newton iteration; BDF then stops trying it
+    # first (it ends the run deep in a streak of refreshed steps) and takes the same
+    # steps to the same solution. Natural variables: the stored one works, no streak.
+    y_skip, n_skip, st_skip = _final_refresh_count("displacement", 4)
+    y_try, _, st_try = _final_refresh_count("displacement", 10**9)
+    assert n_skip > 20, n_skip
+    assert int(st_skip["num_steps"]) == int(st_try["num_steps"])
+    assert np.max(np.abs(y_skip - y_try)) < 1e-9
+    _, n_angle, _ = _final_refresh_count("angle", 4)
+    assert n_angle < 4, n_angle

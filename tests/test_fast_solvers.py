@@ -388,9 +388,9 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
 @pytest.mark.parametrize("a, b", [(1.0, -1e-3), (1.0, -0.1), (100.0, -1.0)])
 def test_second_order_factor_equals_dense_solve(dim, a, b):
     # a I + b J as BDF (a = 1, b = -c) and Rodas5P (a = 1 / (h gamma), b = -1) form
-    # it: the velocity-reduced solve must equal the dense one. The reduced matrix is
-    # far better scaled than the full one (no metres next to metres per second), so
-    # the agreement is much tighter than the full system's 1e-8 above.
+    # it: the velocity-reduced solve must be backward stable and equal the
+    # (refined) dense one to within the conditioning of I - c A_v - c^2 A_x
+    # (c^2 EA k^2 / (mu l^2) ~ 1e6 at c = 0.1: forward errors ~ 1e-10).
     scene = js.scenes.string_pendulum(
         k=11, dim=dim, EA=1e6, effects=("gravity", "kelvin_voigt", "slack")
     )
@@ -406,9 +406,17 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
         jax.jacfwd(lambda v: fn(v.reshape(y.shape)).reshape(-1))(y.reshape(-1))
     )
     rhs = rng.standard_normal(y.shape)
-    dense = np.linalg.solve(a * np.eye(n) + b * J, rhs.reshape(-1))
+    M = a * np.eye(n) + b * J
+    dense = np.linalg.solve(M, rhs.reshape(-1))
+    for _ in range(2):  # refined as in the banded test above
+        res = M.astype(np.longdouble) @ dense.astype(np.longdouble) - rhs.reshape(-1)
+        dense = dense - np.linalg.solve(M, res.astype(np.float64))
     x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
-    assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-11
+    backward = np.max(np.abs(M @ x - rhs.reshape(-1))) / (
+        np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(x))
+    )
+    assert backward < 1e-15, backward
+    assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-9
 
 
 def test_declared_second_order_matches_the_jacobian():
@@ -461,4 +469,4 @@ def test_ynnpack_fusions_are_off():
         pytest.skip(f"flag not set by jaxstring: {_config.XLA_FLAGS_SET_BY}")
     f = jax.jit(lambda x: jnp.sum(x * x[:, ::-1], axis=-1))
     hlo = f.lower(jnp.ones((12, 640, 2))).compile().as_text()
-    assert "ynn" not in hlo.lower()
+    assert "ynn_fusion" not in hlo  # (the test's own name is in the metadata)
