@@ -10,6 +10,20 @@ import os
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# The benchmarks time repeated runs of one compiled solve: compile without XLA:CPU's
+# YNNPACK fusions, as `fit` and `sweep` do (jaxstring/_jit.py: they made the banded
+# Jacobian 4-5x slower at k >= 320), unless the caller set the flag (jaxlib 0.10).
+if "xla_cpu_experimental_ynn_fusion_type" not in os.environ.get("XLA_FLAGS", ""):
+    try:
+        from importlib.metadata import version as _version
+
+        if _version("jaxlib").startswith("0.10."):
+            os.environ["XLA_FLAGS"] = (
+                os.environ.get("XLA_FLAGS", "")
+                + " --xla_cpu_experimental_ynn_fusion_type="
+            ).strip()
+    except Exception:  # noqa: BLE001  (no jaxlib metadata: leave XLA's defaults)
+        pass
 
 import csv
 import dataclasses
@@ -63,6 +77,7 @@ def machine_stamp() -> dict:
         "jax": jax.__version__,
         "numpy": np.__version__,
         "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "?"),
+        "xla_flags": os.environ.get("XLA_FLAGS", "") or "-",
     }
 
 

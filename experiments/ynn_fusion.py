@@ -4,10 +4,11 @@ reduced second-order factorisation.
 Question: what do the pieces of one implicit step cost on the displacement string
 (EA = 1e6) as k grows -- one vector field, the banded Jacobian (12 coloured JVPs),
 the factorisation and one solve -- (a) with jaxlib 0.10's YNNPACK library fusions
-(XLA's default) and with them off (jaxstring's default, `jaxstring._config`), and
+(XLA's default) and with them off (what `jaxstring._jit.cpu_jit` compiles
+simulate, fit and sweep with), and
 (b) for the full 4 x 4-block cyclic reduction against the reduced 2 x 2-block
 system on the velocities (`jaxstring._linalg.SecondOrderFactor`)? Each XLA setting
-runs in its own process (XLA reads XLA_FLAGS when its CPU backend starts). Times
+runs in its own process, set by XLA_FLAGS (read when the CPU backend starts). Times
 are the best of 5 means of 100 calls, in microseconds, after compilation.
 
 Run: ``python experiments/ynn_fusion.py [--quick]``.
@@ -57,7 +58,7 @@ for k in ks:
         row[f"factor_{tag}_us"] = best(fac, J)
         row[f"solve_{tag}_us"] = best(sol, F, y)
     rows.append(row)
-print(json.dumps({"set_by": jaxstring._config.XLA_FLAGS_SET_BY, "rows": rows}))
+print(json.dumps({"rows": rows}))
 """
 
 
@@ -66,8 +67,10 @@ def run(ks, ynn_on):
     flags = env.get("XLA_FLAGS", "").replace(
         "--xla_cpu_experimental_ynn_fusion_type=", ""
     )
-    if ynn_on:
-        # jaxstring leaves a user's own setting alone: give it XLA's default list.
+    if not ynn_on:
+        flags += " --xla_cpu_experimental_ynn_fusion_type="  # what cpu_jit sets
+    else:
+        # XLA's default fusion types, spelled out.
         flags += (
             " --xla_cpu_experimental_ynn_fusion_type="
             "LIBRARY_FUSION_TYPE_DOT,LIBRARY_FUSION_TYPE_ELTWISE,"

@@ -7,14 +7,8 @@
   NumPy/SciPy load it, and, where OpenBLAS was already loaded by the user's own
   imports and ``threadpoolctl`` is installed, limit it at run time too. A user who
   wants something else sets the variable before importing jaxstring.
-* XLA:CPU's YNNPACK library fusions: jaxlib 0.10 hands batched reductions (the
-  colour-batched Jacobian-vector products of a string's banded Jacobian) to
-  YNNPACK, which made them 3-4x slower than XLA's own loops at 640-1280 elements on
-  the 2-core machines (experiments/results/ynn_fusion.md). We add
-  ``--xla_cpu_experimental_ynn_fusion_type=`` (no YNNPACK fusions) to
-  ``XLA_FLAGS`` if the user has not set that flag, the jaxlib is one where it was
-  measured (0.10), and JAX has not started its CPU backend yet (XLA reads the
-  variable then). ``XLA_FLAGS_SET_BY`` says what happened.
+* XLA:CPU's YNNPACK fusions are turned off per compilation for `fit` and `sweep`
+  only (``jaxstring._jit``), not process-wide.
 """
 
 import os
@@ -42,35 +36,6 @@ def _limit_blas_threads() -> str:
 BLAS_THREADS_SET_BY = _limit_blas_threads()
 
 import jax  # noqa: E402
-
-
-_YNN_FLAG = "--xla_cpu_experimental_ynn_fusion_type="
-
-
-def _no_ynn_fusions() -> str:
-    """Turn XLA:CPU's YNNPACK fusions off where safe; return what was done."""
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_cpu_experimental_ynn_fusion_type" in flags:
-        return "user setting in XLA_FLAGS"
-    try:
-        import jaxlib
-
-        version = tuple(int(x) for x in jaxlib.__version__.split(".")[:2])
-    except (ImportError, ValueError):
-        return "not set (jaxlib version unknown)"
-    if version != (0, 10):
-        # An unknown flag aborts XLA: only set it where it is known to exist.
-        return f"not set (jaxlib {jaxlib.__version__} not measured)"
-    from jax._src import xla_bridge
-
-    started = getattr(xla_bridge, "backends_are_initialized", lambda: False)()
-    if started:
-        return "not set (the JAX backend had already started)"
-    os.environ["XLA_FLAGS"] = (flags + " " + _YNN_FLAG).strip()
-    return "XLA_FLAGS"
-
-
-XLA_FLAGS_SET_BY = _no_ynn_fusions()
 
 
 jax.config.update("jax_enable_x64", True)

@@ -32,6 +32,7 @@ import numpy as np
 import optax
 
 from ._controller import make_controller
+from ._jit import cpu_jit
 from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
 from ._simulate import _solve, observables
@@ -406,7 +407,7 @@ def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     return value, grad, f
 
 
-@eqx.filter_jit
+@cpu_jit
 def _make_step(theta, opt_state, pos, frozen, loss_fn, optimizer, config, simulate, ts):
     value, grad, f = _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
     updates, new_state = optimizer.update(
@@ -480,7 +481,7 @@ def _setup(
     return getters, _to_theta(diff, pos), pos, frozen, config, ts
 
 
-@eqx.filter_jit
+@cpu_jit
 def _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     value, grad, _ = _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
     return value, grad
@@ -751,7 +752,7 @@ def gauss_newton(
     }
 
 
-@eqx.filter_jit
+@cpu_jit
 def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
     def res(p):
         sc = eqx.tree_at(

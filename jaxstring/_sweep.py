@@ -23,7 +23,7 @@ experiments/sweep_speed.py):
   shapes inside it, and a jit over `NamedSharding` inputs turns the batched loop
   predicate into a cross-device reduction every step.)
 * compiler options: the sweeps compile without XLA:CPU's YNNPACK fusions
-  (`_SWEEP_COMPILER_OPTIONS`), which run the small reductions of vmapped string
+  (`jaxstring._jit.cpu_jit`), which run the small reductions of vmapped string
   models several times slower (one group of 64 members: 4.98 s -> 2.64 s).
 * grouping (`batch_size`): members run in groups of `batch_size` (vmap inside a
   `lax.map`), so a slow member only holds up its own group; with `order="sort"` members
@@ -67,7 +67,6 @@ arithmetic at a few ns per flop whatever the layout (a members-last variant unde
 """
 
 import concurrent.futures
-import functools
 import math
 import time
 from collections.abc import Callable
@@ -83,6 +82,7 @@ import numpy as np
 from ._controller import make_controller
 from ._fit import SolveConfig, resolve, solve
 from ._fixed_step import ThetaMethod
+from ._jit import cpu_jit
 from ._projection import ProjectedSolver
 from ._root_finder import StageNewton
 from ._scene import Scene
@@ -149,40 +149,10 @@ def _run_group(vals, scene, getters, fn, config, ts, batch_size):
     return jax.lax.map(member, vals, batch_size=batch_size)
 
 
-# XLA:CPU (jax 0.10) hands some fusions to YNNPACK by default. In a vmapped string
-# solve these are small reductions over 2-4 components with the members in front
-# (e.g. the dot products inside the Jacobian's JVPs), which YNNPACK runs several
-# times slower than XLA's own loop fusions: k = 20 displacement pendulum, 64
-# members, implicit Euler dt = 0.005, one group of 64: 4.98 s -> 2.64 s; groups of
-# 16: 3.00 s -> 2.03 s (experiments/sweep_speed.py). A single solve gains little
-# (0-10 %), so only the sweeps compile without them.
-_SWEEP_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
-
-
-def _sweep_jit(fun):
-    """`eqx.filter_jit` for the sweeps: arrays traced, everything else static (and
-    hashable), compiled on CPU with `_SWEEP_COMPILER_OPTIONS`."""
-
-    def call(dynamic, static):
-        return fun(*eqx.combine(dynamic, static))
-
-    jitted = {
-        True: jax.jit(call, static_argnums=1, compiler_options=_SWEEP_COMPILER_OPTIONS),
-        False: jax.jit(call, static_argnums=1),
-    }
-
-    @functools.wraps(fun)
-    def wrapper(*args):
-        dynamic, static = eqx.partition(args, eqx.is_array)
-        on_cpu = all(
-            d.platform == "cpu"
-            for x in jtu.tree_leaves(dynamic)
-            if isinstance(x, jax.Array)
-            for d in x.devices()
-        )
-        return jitted[on_cpu](dynamic, static)
-
-    return wrapper
+# The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`): k = 20
+# displacement pendulum, 64 members, implicit Euler dt = 0.005, one group of 64:
+# 4.98 s -> 2.64 s; groups of 16: 3.00 s -> 2.03 s (experiments/sweep_speed.py).
+_sweep_jit = cpu_jit
 
 
 @_sweep_jit
