@@ -140,9 +140,11 @@ def main(
             active = [a for a in active if "[" in a or a == best]
     exps = []
     for name in dict.fromkeys(r["solver"] for r in rows):
-        pts = [(r["k"], r["run_s"]) for r in rows if r["solver"] == name and r["ok"]]
-        if len(pts) >= 2:
-            x, y = zip(*pts)
+        ok = [r for r in rows if r["solver"] == name and r["ok"]]
+        if len(ok) >= 2:
+            x = [r["k"] for r in ok]
+            y = [r["run_s"] for r in ok]
+            steps = [r.get("num_steps") for r in ok]
             exps.append(
                 {
                     "solver": name,
@@ -154,15 +156,9 @@ def main(
                     if len(x) >= 3
                     else math.nan,
                     "best": name == best,
-                    "steps_exponent": fit_exponent(
-                        x,
-                        [
-                            r["num_steps"]
-                            for r in rows
-                            if r["solver"] == name and r["ok"]
-                        ],
-                    )
-                    if "[" not in name
+                    # peers report no step count
+                    "steps_exponent": fit_exponent(x, steps)
+                    if None not in steps
                     else math.nan,
                 }
             )

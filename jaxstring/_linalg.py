@@ -164,16 +164,20 @@ def declared_width(fn, y, args=None):
     solver's stage relation) and the unknown `y` has the scene's state shape, else
     None. The stage relations of implicit methods (y - c f(y) and the like) have the
     band of the vector field."""
+    scene = _declared_scene(fn, y, args)
+    return None if scene is None else scene.model.node_bandwidth(scene.effects)
+
+
+def _declared_scene(fn, y, args):
+    """The one scene in `fn` and `args` whose state has the shape of the 2-d unknown
+    `y`, else None."""
     if not (hasattr(y, "shape") and len(y.shape) == 2):
         return None
     is_scene = lambda x: isinstance(x, Scene)
     scenes = [x for x in jtu.tree_leaves((fn, args), is_leaf=is_scene) if is_scene(x)]
-    if len(scenes) != 1:
+    if len(scenes) != 1 or tuple(np.shape(scenes[0].y0)) != tuple(y.shape):
         return None
-    scene = scenes[0]
-    if tuple(np.shape(scene.y0)) != tuple(y.shape):
-        return None
-    return scene.model.node_bandwidth(scene.effects)
+    return scenes[0]
 
 
 def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
@@ -571,13 +575,8 @@ def declared_second_order(fn, y, args=None) -> int:
     """d > 0 when the scene's model (found as in `declared_width`) declares the
     (q, v) node layout with dq/dt = v (`AbstractModel.second_order`) and `y` has
     the scene's state shape; else 0."""
-    if not (hasattr(y, "shape") and len(y.shape) == 2):
-        return 0
-    is_scene = lambda x: isinstance(x, Scene)
-    scenes = [x for x in jtu.tree_leaves((fn, args), is_leaf=is_scene) if is_scene(x)]
-    if len(scenes) != 1 or tuple(np.shape(scenes[0].y0)) != tuple(y.shape):
-        return 0
-    return int(scenes[0].model.second_order(scenes[0].effects))
+    scene = _declared_scene(fn, y, args)
+    return 0 if scene is None else int(scene.model.second_order(scene.effects))
 
 
 def jacobian(fn, y, width, linear_fn=None, second_order=0):

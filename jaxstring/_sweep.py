@@ -152,10 +152,7 @@ def _run_group(vals, scene, getters, fn, config, ts, batch_size):
 # The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`): k = 20
 # displacement pendulum, 64 members, implicit Euler dt = 0.005, one group of 64:
 # 4.98 s -> 2.64 s; groups of 16: 3.00 s -> 2.03 s (experiments/sweep_speed.py).
-_sweep_jit = cpu_jit
-
-
-@_sweep_jit
+@cpu_jit
 def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
     return _run_group(vals, scene, getters, fn, config, ts, batch_size)
 
@@ -277,7 +274,7 @@ def _lockstep_solver(config, scene):
     return cls(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
 
 
-@_sweep_jit
+@cpu_jit
 def _sweep_lockstep(vals, scene, getters, fn, config, ts, batch_size):
     """Lockstep solves of the members, all at once or in consecutive groups of
     `batch_size` (each group its own shared step sequence; `lax.map`)."""
