@@ -29,18 +29,23 @@ How it fits into diffrax (static shapes, fixed-size solver state):
   accepted factor is at least 1, so "accept and shrink" becomes "accept and keep h"
   (the next step then decides). This needs the solver's `rtol`, `atol` to equal the
   controller's (``simulate`` passes them so).
-* The Jacobian and its factorisation are reused across steps; I - c J is
-  refactorised when c = h / alpha_q has changed by more than 30 % since the last
-  factorisation (as CVODE, which also scales the chord correction by
-  2 / (1 + c / c_lu), as done here), and J is recomputed at the predictor when the
-  Newton iteration fails with a stale J (scipy). A step whose Newton iteration fails
-  with a fresh J is rejected with factor 1/2. (diffrax keeps the solver state of
-  accepted steps only, so a Jacobian refreshed during a rejected attempt is
-  recomputed on the retry.) On the stiffest strings nearly every rejection is such a
-  Newton failure, so after a rejection the step may not grow back past 90 % of the
-  rejected one at once; that cap relaxes by 5 % per accepted step (measured at
-  k = 40, EA = 1e9, 0.5 s: 1250 -> 1170 attempts).
-* Where the stored Jacobian keeps failing, the attempt with it is skipped. In
+* The factorisation of I - c J is reused across steps (CVODE also scales the chord
+  correction by 2 / (1 + c / c_lu) for c != c_lu, as done here). J is evaluated at
+  the predictor and I - c J factorised afresh when the Newton iteration fails with
+  the stored factorisation (scipy), or when c = h / alpha_q has changed by more
+  than 30 % since the last factorisation. The state keeps the factorisation only,
+  not J: scipy and CVODE refactorise a stored J on a change of c, but every array
+  of the solver state is copied through diffrax's accept/reject select and the
+  while loop, and J is the largest (48 doubles a node of a 2D string; at k = 640
+  carrying it cost 5-10 % of a step), while a fresh J costs one Jacobian
+  evaluation on the rare change of c and converges at least as well. A step whose
+  Newton iteration fails with a fresh J is rejected with factor 1/2. (diffrax
+  keeps the solver state of accepted steps only, so a Jacobian refreshed during a
+  rejected attempt is recomputed on the retry.) On the stiffest strings nearly
+  every rejection is such a Newton failure, so after a rejection the step may not
+  grow back past 90 % of the rejected one at once; that cap relaxes by 5 % per
+  accepted step (measured at k = 40, EA = 1e9, 0.5 s: 1250 -> 1170 attempts).
+* Where the stored factorisation keeps failing, the attempt with it is skipped. In
   displacement variables the stiff springs turn with the string and a Jacobian from
   the previous step contracted the Newton iteration in 0.07 % of the steps (k = 40,
   rtol 1e-7); each failed attempt cost one or two vector fields and solves before
@@ -135,6 +140,27 @@ def _change_matrix(order, factor):
     return jnp.where(inside, ru.T, jnp.eye(n, dtype=ru.dtype))
 
 
+def _combine(w, D):
+    """`tensordot(w, D, axes=1)` for the few (<= 8) difference rows of D, as
+    broadcast multiply-adds: XLA:CPU fuses these with their neighbours, whereas a
+    `dot` with a contraction of 6 is a separate kernel, as slow as several passes
+    over D (k = 640: 29 us for the rescaling `T @ D`)."""
+    w = jnp.asarray(w, D.dtype)
+    lead = w.shape[:-1]
+    out = 0.0
+    for j in range(w.shape[-1]):
+        out = out + w[..., j].reshape(lead + (1,) * (D.ndim - 1)) * D[j]
+    return out
+
+
+def _rev_cumsum(D):
+    """Reverse cumulative sum over the rows of D (`D[i] + D[i+1] + ...`), unrolled."""
+    acc = [D[-1]]
+    for j in range(D.shape[0] - 2, -1, -1):
+        acc.append(acc[-1] + D[j])
+    return jnp.stack(acc[::-1])
+
+
 def _rows(D):
     return jnp.arange(D.shape[0]).reshape((-1,) + (1,) * (D.ndim - 1))
 
@@ -144,8 +170,7 @@ class BDFState(eqx.Module):
     h: jax.Array  # the step D is scaled to
     order: jax.Array  # int, 1 ... max_order
     n_equal: jax.Array  # steps since the last change of h or order
-    jac: Any  # DenseJacobian or BlockTridiagonal, no gradient
-    lu: Any  # factorisation of I - c_lu jac
+    lu: Any  # factorisation of I - c_lu J (J at an earlier predictor), no gradient
     c_lu: jax.Array
     h_next: jax.Array  # the step this solver asked for next
     h_cap: jax.Array  # growth cap after a rejection (see `step`)
@@ -167,7 +192,7 @@ class BDFInterpolation(dfx.AbstractLocalInterpolation):
         m = jnp.arange(MAX_ORDER)
         x = (t0 - (self.t1 - m * h)) / ((m + 1) * h)
         p = jnp.cumprod(x)
-        return self.D[0] + jnp.tensordot(p, self.D[1:], axes=1)
+        return self.D[0] + _combine(p, self.D[1:])
 
 
 class _VF(eqx.Module):
@@ -251,7 +276,6 @@ class BDF(dfx.AbstractAdaptiveSolver):
             h=h,
             order=jnp.array(1, jnp.int32),
             n_equal=jnp.array(0, jnp.int32),
-            jac=jac,
             lu=lu,
             c_lu=c,
             h_next=h,
@@ -277,7 +301,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         # Rescale D from st.h to h (exact for the interpolating polynomial).
         factor = h / st.h
         T = _change_matrix(order, factor)
-        D = jnp.concatenate([jnp.tensordot(T, D[: MAX_ORDER + 1], axes=1), D[-2:]])
+        D = jnp.concatenate([_combine(T, D[: MAX_ORDER + 1]), D[-2:]])
         same_h = jnp.abs(factor - 1) < 1e-6
         n_equal = jnp.where(same_h, st.n_equal, 0)
         # A step shorter than the one asked for follows a rejection (nearly always a
@@ -292,7 +316,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         alpha = jnp.asarray(_ALPHA, dtype)[order]
         y_pred = jnp.sum(jnp.where(rows <= order, D, 0.0), axis=0)
         gam = jnp.where(jnp.arange(1, MAX_ORDER + 1) <= order, _GAMMA[1:], 0.0)
-        psi = jnp.tensordot(gam.astype(dtype), D[1 : MAX_ORDER + 1], axes=1) / alpha
+        psi = _combine(gam, D[1 : MAX_ORDER + 1]) / alpha
         c = h / alpha
         scale = atol + rtol * jnp.abs(y_pred)
         width = self._width(terms, t1, y_pred, args)
@@ -304,12 +328,15 @@ class BDF(dfx.AbstractAdaptiveSolver):
         skip = (st.n_refresh >= _SKIP_STORED_AFTER) & (
             st.n_refresh % _RETRY_STORED != 0
         )
-        # The stored factorisation, refreshed if c moved by more than 30 %.
+        # The stored factorisation, or a fresh one if c moved by more than 30 %.
         stale_c = (jnp.abs(c / st.c_lu - 1) > _REFACTOR_CHANGE) & ~skip
+
+        def fresh_factor():
+            jac = self._jacobian(terms, t1, y_pred, args, width)
+            return _linalg.factor(jac.scale_shift(1.0, -c))
+
         lu0, c_lu0 = lax.cond(
-            stale_c,
-            lambda: (_linalg.factor(st.jac.scale_shift(1.0, -c)), c),
-            lambda: (st.lu, st.c_lu),
+            stale_c, lambda: (fresh_factor(), c), lambda: (st.lu, st.c_lu)
         )
         lu0 = lax.stop_gradient(lu0)
         c_lu0 = lax.stop_gradient(c_lu0)
@@ -359,18 +386,18 @@ class BDF(dfx.AbstractAdaptiveSolver):
             )
 
             def refresh():
-                jac = self._jacobian(terms, t1, y_pred, args, width)
-                lu = _linalg.factor(jac.scale_shift(1.0, -c))
+                lu = fresh_factor()
                 d, conv, k = newton(fn, d0, lu, c)
-                return d, conv, k, jac, lu, c
+                return d, conv, k, lu, c
 
             def keep():
-                return d_a, conv_a, k_a, st.jac, lu0, c_lu0
+                return d_a, conv_a, k_a, lu0, c_lu0
 
-            d, conv, k, jac, lu, c_lu = lax.cond(conv_a, keep, refresh)
+            # A factorisation made fresh for a change of c is not made again.
+            d, conv, k, lu, c_lu = lax.cond(conv_a | stale_c, keep, refresh)
             # custom_root gives its aux output tangents of the aux dtype, which
             # JAX rejects for integers (float0 expected): pass them as floats.
-            aux_tree = (conv, k, jac, lu, c_lu, ~conv_a)
+            aux_tree = (conv, k, lu, c_lu, ~conv_a & ~stale_c)
             leaves, treedef = jax.tree_util.tree_flatten(aux_tree)
             aux_types.append((treedef, [x.dtype for x in leaves]))
             return d, [x.astype(dtype) for x in leaves]
@@ -386,9 +413,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         )
         treedef, types = aux_types[-1]
         aux = [lax.stop_gradient(x).astype(t) for x, t in zip(aux, types)]
-        conv, n_iter, jac, lu, c_lu, refreshed = jax.tree_util.tree_unflatten(
-            treedef, aux
-        )
+        conv, n_iter, lu, c_lu, refreshed = jax.tree_util.tree_unflatten(treedef, aux)
         y_new = y_pred + d
         finite = jnp.all(jnp.isfinite(y_new))
         conv = conv & finite
@@ -412,7 +437,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         d_old_next = jnp.take(D, order + 1, axis=0)
         Dd = jnp.where(rows == order + 1, d, D)
         Dm = jnp.where(rows <= order + 1, Dd, 0.0)
-        csum = jnp.flip(jnp.cumsum(jnp.flip(Dm, 0), axis=0), 0)
+        csum = _rev_cumsum(Dm)
         D_acc = jnp.where(rows <= order, csum, Dd)
         D_acc = jnp.where(rows == order + 2, d - d_old_next, D_acc)
         n_acc = n_equal + 1
@@ -478,7 +503,6 @@ class BDF(dfx.AbstractAdaptiveSolver):
             h=h,
             order=new_order,
             n_equal=n_acc.astype(jnp.int32),
-            jac=jac,
             lu=lu,
             c_lu=c_lu,
             h_next=h * jnp.maximum(f_accept, 1.0),
