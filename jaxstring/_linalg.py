@@ -246,11 +246,9 @@ class BlockTridiagonal(eqx.Module):
         z = jnp.zeros_like(X[:1])
         left = jnp.concatenate([z, X[:-1]], axis=0)
         right = jnp.concatenate([X[1:], z], axis=0)
-        out = (
-            jnp.einsum("nij,nj->ni", self.lower, left)
-            + jnp.einsum("nij,nj->ni", self.diag, X)
-            + jnp.einsum("nij,nj->ni", self.upper, right)
-        )
+        # Broadcast multiply-adds (`_mv`), which XLA:CPU fuses into one loop; three
+        # batched `dot`s of 2 x 2 blocks were three slower kernels.
+        out = _mv(self.lower, left) + _mv(self.diag, X) + _mv(self.upper, right)
         return self._unpad(out)
 
     def scale_shift(self, alpha, beta):

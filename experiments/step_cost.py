@@ -1,0 +1,181 @@
+"""Where the time of one BDF step goes as k grows (displacement string, EA = 1e6).
+
+Question: a BDF step on the release start at k = 1280 costs about ten times one at
+k = 40; which part of it grows? Each piece is timed *inside* one compiled loop (a
+`lax.fori_loop` of `n` calls, so no dispatch cost is counted), as the solver runs
+it: one vector field, the banded Jacobian (12 coloured JVPs), the reduced
+factorisation of I - c J, one solve with it, and one whole `BDF.step` (repeated
+from the same state: order 5, fresh Jacobian every step, as in displacement
+variables). The last column is the cost
+per step of a real `simulate` over a short release (rtol = atol = 1e-7). All in
+microseconds, best of 5 loops, after compilation, one process.
+
+Run: ``python experiments/step_cost.py [--quick]``.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _common import new_figure, savefig, write_table  # sets XLA_FLAGS
+
+import jaxstring
+from jaxstring import _linalg
+from jaxstring._bdf import BDF
+from jaxstring._simulate import scene_vector_field
+
+
+def loop_us(body, x0, n):
+    """Best of 5 of the mean time of one `body` call in a compiled loop of `n`."""
+    f = jax.jit(lambda x: jax.lax.fori_loop(0, n, lambda i, x: body(x), x))
+    jax.block_until_ready(f(x0))
+    best = np.inf
+    for _ in range(5):
+        t = time.perf_counter()
+        jax.block_until_ready(f(x0))
+        best = min(best, (time.perf_counter() - t) / n * 1e6)
+    return best
+
+
+def pieces(k, n):
+    sc = jaxstring.scenes.string_pendulum(formulation="displacement", k=k, EA=1e6)
+    y = sc.y0 + 0.01
+    f = lambda u: sc.vector_field(0.0, u)
+    jac = lambda u: _linalg.jacobian(f, u, 1, second_order=2)
+    J = jac(y)
+    c = 1e-4
+    F = _linalg.factor(J.scale_shift(1.0, -c))
+
+    def fac_body(carry):
+        Jc, acc = carry
+        Fc = _linalg.factor(Jc.scale_shift(1.0, -c * (1.0 + acc)))
+        return Jc, acc + 1e-30 * Fc.sfac.dinv_last[0, 0]
+
+    row = {
+        "k": k,
+        "n_states": int(y.size),
+        "rhs_us": loop_us(lambda u: u + 1e-9 * f(u), y, n),
+        "jacobian_us": loop_us(lambda u: u + 1e-9 * jac(u).diag[:, 0, :].sum(), y, n),
+        "factor_us": loop_us(fac_body, (J, jnp.asarray(0.0)), n),
+        "solve_us": loop_us(lambda r: 0.5 * (F.solve(r) + r), y, n),
+    }
+    # One whole BDF step, repeated from the same (t0, y0) with the state carried.
+    solver = BDF(rtol=1e-7, atol=1e-7)
+    term = dfx.ODETerm(scene_vector_field)
+    h = 1e-4
+    st0 = solver.init(term, 0.0, h, sc.y0, sc)
+
+    step_body = lambda st: solver.step(term, 0.0, h, sc.y0, sc, st, False)[3]
+    row["bdf_step_us"] = loop_us(step_body, st0, n)
+    return row
+
+
+def simulate_per_step(k, t1):
+    sc = jaxstring.scenes.string_pendulum(
+        formulation="displacement", k=k, EA=1e6, t1=t1
+    )
+    ts = np.linspace(0.0, t1, 5)
+    run = lambda: jax.block_until_ready(
+        jaxstring.simulate(sc, "bdf", rtol=1e-7, atol=1e-7, ts=ts, max_steps=10**6)
+    )
+    run()
+    run()  # the first execution can be slow without YNNPACK (README)
+    best, traj = np.inf, None
+    for _ in range(3):
+        t = time.perf_counter()
+        traj = run()
+        best = min(best, time.perf_counter() - t)
+    steps = int(traj.stats["num_steps"])
+    return best / steps * 1e6, steps
+
+
+def main(quick=False):
+    ks = (40, 160) if quick else (40, 160, 640, 1280)
+    n = 50 if quick else 200
+    rows = []
+    for k in ks:
+        row = pieces(k, n)
+        # a short release: about 1000-4000 steps at each k
+        t1 = {40: 1.0, 160: 0.5, 640: 0.15, 1280: 0.1}[k]
+        row["simulate_step_us"], row["simulate_steps"] = simulate_per_step(k, t1)
+        row["simulate_t1"] = t1
+        rows.append(row)
+        print(
+            f"k={k}: rhs {row['rhs_us']:.1f} jac {row['jacobian_us']:.1f} "
+            f"factor {row['factor_us']:.1f} solve {row['solve_us']:.1f} "
+            f"step {row['bdf_step_us']:.0f} simulate/step "
+            f"{row['simulate_step_us']:.0f} us",
+            flush=True,
+        )
+    r0, r1 = rows[0], rows[-1]
+    notes = [
+        "Times in microseconds per call inside one compiled loop (best of 5), "
+        "after compilation; simulate_step_us: wall time of a short simulate "
+        "(release start, rtol = atol = 1e-7, t1 = simulate_t1 s) over its steps.",
+        "A displacement BDF step takes one Jacobian, one factorisation and about "
+        "2-3 solves and vector fields; the rest of bdf_step_us is the step's own "
+        "arithmetic on the difference array D (8 rows of the state) and the "
+        "selects that carry the state.",
+    ]
+    for col in (
+        "rhs_us",
+        "jacobian_us",
+        "factor_us",
+        "solve_us",
+        "bdf_step_us",
+        "simulate_step_us",
+    ):
+        notes.append(
+            f"{col}: k = {r1['k']} / k = {r0['k']}: {r1[col] / r0[col]:.1f}x "
+            f"(k ratio {r1['k'] / r0['k']:.0f}; exponent "
+            f"{np.log(r1[col] / r0[col]) / np.log(r1['k'] / r0['k']):.2f})."
+        )
+    name = "step_cost" + ("_quick" if quick else "")
+    write_table(
+        name,
+        rows,
+        [
+            "k",
+            "n_states",
+            "rhs_us",
+            "jacobian_us",
+            "factor_us",
+            "solve_us",
+            "bdf_step_us",
+            "simulate_step_us",
+            "simulate_steps",
+            "simulate_t1",
+        ],
+        "Cost of one BDF step and its pieces vs k (displacement, EA = 1e6)",
+        notes,
+    )
+    fig, ax = new_figure()
+    k = [r["k"] for r in rows]
+    for col, lab in (
+        ("simulate_step_us", "simulate, per step"),
+        ("bdf_step_us", "BDF.step"),
+        ("factor_us", "factorisation"),
+        ("jacobian_us", "Jacobian"),
+        ("solve_us", "one solve"),
+        ("rhs_us", "one vector field"),
+    ):
+        ax.loglog(k, [r[col] for r in rows], "o-", label=lab)
+    ax.set_xlabel("k (elements)")
+    ax.set_ylabel("microseconds")
+    ax.set_title("one BDF step and its pieces, displacement")
+    ax.legend(fontsize=7)
+    savefig(fig, name)
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    main(p.parse_args().quick)
