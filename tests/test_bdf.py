@@ -329,3 +329,27 @@ def test_stored_jacobian_skipped_only_where_it_keeps_failing():
     assert np.max(np.abs(y_skip - y_try)) < 1e-9
     _, n_angle, _ = _final_refresh_count("angle", 4)
     assert n_angle < 4, n_angle
+
+
+def test_difference_row_helpers_equal_tensordot_and_cumsum():
+    """The unrolled row combinations of the difference array (used instead of a
+    `dot` and a `cumsum`, which XLA:CPU runs as separate kernels) are the same
+    sums, to rounding."""
+    from jaxstring._bdf import _change_matrix, _combine, _rev_cumsum
+
+    rng = np.random.default_rng(3)
+    D = jnp.asarray(rng.standard_normal((8, 7, 4)))
+    T = _change_matrix(jnp.asarray(3), jnp.asarray(0.7))
+    np.testing.assert_allclose(
+        _combine(T, D[:6]), jnp.tensordot(T, D[:6], axes=1), rtol=0, atol=1e-13
+    )
+    w = jnp.asarray(rng.standard_normal(5))
+    np.testing.assert_allclose(
+        _combine(w, D[1:6]), jnp.tensordot(w, D[1:6], axes=1), rtol=0, atol=1e-13
+    )
+    np.testing.assert_allclose(
+        _rev_cumsum(D),
+        np.cumsum(np.asarray(D)[::-1], axis=0)[::-1],
+        rtol=0,
+        atol=1e-13,
+    )
