@@ -7,8 +7,8 @@
   NumPy/SciPy load it, and, where OpenBLAS was already loaded by the user's own
   imports and ``threadpoolctl`` is installed, limit it at run time too. A user who
   wants something else sets the variable before importing jaxstring.
-* XLA:CPU's YNNPACK fusions are turned off per compilation for `fit` and `sweep`
-  only (``jaxstring._jit``), not process-wide.
+* XLA:CPU's YNNPACK fusions are turned off per compilation for `simulate`, `fit`
+  and `sweep` (``jaxstring._jit``), not process-wide.
 """
 
 import os

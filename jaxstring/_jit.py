@@ -10,15 +10,19 @@ times slower than XLA's own loop fusions on the 2-core machines:
 * k = 20 pendulum sweep, 64 members, one group: 4.98 s -> 2.64 s without them
   (`experiments/sweep_speed.py`).
 
-So `fit` and `sweep`, which run one compiled solve many times, compile with the
-option ``xla_cpu_experimental_ynn_fusion_type = ""`` on CPU. `simulate` keeps XLA's
-defaults: with the option, the *first* execution of a compiled solve ran 3-4 ms per
-step slower than later ones at k >= 640 (BDF, displacement, k = 640, 2 s: 60 s then
-8.7 s; with XLA's defaults 26 s then 19 s; not understood), so a one-off run is
-faster without it. A user who repeats long runs at large k sets
-``XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type=`` before JAX starts (the
-experiments do). It is a per-compilation option: the user's own JAX code keeps
-XLA's defaults.
+So `simulate`, `fit` and `sweep` compile with the option
+``xla_cpu_experimental_ynn_fusion_type = ""`` on CPU. It is a per-compilation
+option: the user's own JAX code keeps XLA's defaults.
+
+Until session 9, `simulate` kept XLA's defaults: with the option, the *first*
+execution of a BDF solve at k >= 640 ran 3-4 ms per step slower than later ones
+(k = 640, 2 s: 60 s then 8.7 s; with XLA's defaults 26 s then 19 s; never
+understood). Since BDF stopped carrying its Jacobian in the solver state and
+combines its difference rows without `dot` and `cumsum` (session 9), the gap is
+gone: k = 640, 2 s, first call (with compilation) 15.8 s, then 7.4 s and 7.2 s;
+with XLA's defaults 22.3 s, then 14.1 s; k = 1280, 1 s: 22.4 s, then 14.8 s
+(session 8: 94-107 s, then 13-17 s). Kvaerno5 and Rodas5P at k = 640 show no gap
+either.
 """
 
 import functools
@@ -51,14 +55,17 @@ def cpu_jit(fun):
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
         dynamic, static = split(args, kwargs)
-        on_cpu = all(
-            d.platform == "cpu"
-            for x in jtu.tree_leaves(dynamic)
-            if isinstance(x, jax.Array)
-            for d in x.devices()
+        leaves = [x for x in jtu.tree_leaves(dynamic) if isinstance(x, jax.Array)]
+        # Inside another trace (a caller's jit, vmap or grad) the outer compilation
+        # decides the options, and JAX refuses them on a nested jit.
+        traced = any(isinstance(x, jax.core.Tracer) for x in leaves)
+        on_cpu = not traced and all(
+            d.platform == "cpu" for x in leaves for d in x.devices()
         )
         return jitted[on_cpu](dynamic, static)
 
     # The CPU compilation, for inspection: `fn.lower_cpu(*args).compile().as_text()`.
     wrapper.lower_cpu = lambda *args, **kwargs: jitted[True].lower(*split(args, kwargs))
+    # Compiled variants so far (tests check that new parameter values reuse one).
+    wrapper.cache_size = lambda: sum(j._cache_size() for j in jitted.values())
     return wrapper

@@ -1,12 +1,12 @@
 """simulate(scene, ...) -> Trajectory."""
 
 import diffrax as dfx
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._controller import STEP_CONTROLS, make_controller
+from ._jit import cpu_jit
 from ._presets import ACCURACY_PRESETS
 from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
@@ -20,7 +20,7 @@ def observables(scene: Scene, ts, ys):
     return jax.vmap(lambda t, y: scene.model.observables(t, y, scene.effects))(ts, ys)
 
 
-@eqx.filter_jit
+@cpu_jit
 def _solve(
     scene,
     ts,
