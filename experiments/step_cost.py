@@ -34,6 +34,16 @@ from jaxstring._bdf import BDF
 from jaxstring._simulate import scene_vector_field
 
 
+TIMES = (
+    "rhs_us",
+    "jacobian_us",
+    "factor_us",
+    "solve_us",
+    "bdf_step_us",
+    "simulate_step_us",
+)
+
+
 def loop_us(body, x0, const, n):
     """Best of 5 of the mean time of one `body(x, const)` call in a compiled loop of
     `n`. `const` (the scene, the matrix, the factorisation) is an argument of the
@@ -137,14 +147,7 @@ def main(quick=False):
         "arithmetic on the difference array D (8 rows of the state) and the "
         "selects that carry the state.",
     ]
-    for col in (
-        "rhs_us",
-        "jacobian_us",
-        "factor_us",
-        "solve_us",
-        "bdf_step_us",
-        "simulate_step_us",
-    ):
+    for col in TIMES:
         notes.append(
             f"{col}: k = {r1['k']} / k = {r0['k']}: {r1[col] / r0[col]:.1f}x "
             f"(k ratio {r1['k'] / r0['k']:.0f}; exponent "
@@ -154,18 +157,7 @@ def main(quick=False):
     write_table(
         name,
         rows,
-        [
-            "k",
-            "n_states",
-            "rhs_us",
-            "jacobian_us",
-            "factor_us",
-            "solve_us",
-            "bdf_step_us",
-            "simulate_step_us",
-            "simulate_steps",
-            "simulate_t1",
-        ],
+        ["k", "n_states", *TIMES, "simulate_steps", "simulate_t1"],
         "Cost of one BDF step and its pieces vs k (displacement, EA = 1e6)",
         notes,
     )
