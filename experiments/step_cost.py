@@ -3,8 +3,10 @@
 Question: a BDF step on the release start at k = 1280 costs about ten times one at
 k = 40; which part of it grows? Each piece is timed *inside* one compiled loop (a
 `lax.fori_loop` of `n` calls, so no dispatch cost is counted), as the solver runs
-it: one vector field, the banded Jacobian (12 coloured JVPs), the reduced
-factorisation of I - c J, one solve with it, and one whole `BDF.step` (repeated
+it: one vector field, the banded Jacobian by 12 coloured JVPs (the generic probe),
+the model's own element-wise Jacobian (`DisplacementString.vf_jacobian`, which the
+solvers use since session 10), the reduced factorisation of I - c J built from it,
+one solve with it, and one whole `BDF.step` (repeated
 from the same state: order 5, fresh Jacobian every step, as in displacement
 variables). The last column is the cost
 per step of a real `simulate` over a short release (rtol = atol = 1e-7). All in
@@ -37,6 +39,7 @@ from jaxstring._simulate import scene_vector_field
 TIMES = (
     "rhs_us",
     "jacobian_us",
+    "model_jacobian_us",
     "factor_us",
     "solve_us",
     "bdf_step_us",
@@ -74,7 +77,8 @@ def pieces(k, n):
     jac = lambda u, s: _linalg.jacobian(
         lambda v: s.vector_field(0.0, v), u, 1, second_order=2
     )
-    J = jac(y, sc)
+    # The solver's path: the model's own element-wise Jacobian (`vf_jacobian`).
+    J = sc.model.vf_jacobian(0.0, y, sc.effects)
     c = 1e-4
     F = _linalg.factor(J.scale_shift(1.0, -c))
 
@@ -87,6 +91,12 @@ def pieces(k, n):
         "n_states": int(y.size),
         "rhs_us": loop_us(lambda u, s: u + 1e-9 * s.vector_field(0.0, u), y, sc, n),
         "jacobian_us": loop_us(lambda u, s: u + 1e-30 * _touch(jac(u, s)), y, sc, n),
+        "model_jacobian_us": loop_us(
+            lambda u, s: u + 1e-30 * _touch(s.model.vf_jacobian(0.0, u, s.effects)),
+            y,
+            sc,
+            n,
+        ),
         "factor_us": loop_us(fac_body, jnp.asarray(0.0), J, n),
         "solve_us": loop_us(lambda r, FF: 0.5 * (FF.solve(r) + r), y, F, n),
     }
@@ -132,6 +142,7 @@ def main(quick=False):
         rows.append(row)
         print(
             f"k={k}: rhs {row['rhs_us']:.1f} jac {row['jacobian_us']:.1f} "
+            f"model jac {row['model_jacobian_us']:.1f} "
             f"factor {row['factor_us']:.1f} solve {row['solve_us']:.1f} "
             f"step {row['bdf_step_us']:.0f} simulate/step "
             f"{row['simulate_step_us']:.0f} us",
@@ -142,6 +153,9 @@ def main(quick=False):
         "Times in microseconds per call inside one compiled loop (best of 5), "
         "after compilation; simulate_step_us: wall time of a short simulate "
         "(release start, rtol = atol = 1e-7, t1 = simulate_t1 s) over its steps.",
+        "jacobian_us: the generic probe (12 coloured JVPs of the vector field); "
+        "model_jacobian_us: the string's element-wise Jacobian, the one the solvers "
+        "use; factor_us factorises I - c J from it.",
         "A displacement BDF step takes one Jacobian, one factorisation and about "
         "2-3 solves and vector fields; the rest of bdf_step_us is the step's own "
         "arithmetic on the difference array D (8 rows of the state) and the "
@@ -168,7 +182,8 @@ def main(quick=False):
         ("simulate_step_us", "simulate, per step"),
         ("bdf_step_us", "BDF.step"),
         ("factor_us", "factorisation"),
-        ("jacobian_us", "Jacobian"),
+        ("jacobian_us", "Jacobian, 12 JVPs"),
+        ("model_jacobian_us", "Jacobian, element-wise"),
         ("solve_us", "one solve"),
         ("rhs_us", "one vector field"),
     ):

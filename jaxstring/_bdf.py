@@ -9,8 +9,10 @@ the current step h), NDF "fixed leading coefficient" formulas (kappa of Shampine
 Reichelt), simplified Newton with a stored Jacobian, the local error estimated from
 the next difference, and order selection among q - 1, q, q + 1 after q + 1 equal
 steps. One accepted step costs two to four vector fields and back-substitutions and,
-rarely, one Jacobian (3 b coloured JVPs) and one factorisation of I - c J (block
-cyclic reduction): O(k) for a string of k elements (``jaxstring._linalg``).
+rarely, one Jacobian (the model's own, `AbstractModel.vf_jacobian`, where it has
+one, as the displacement string does; else 3 b coloured JVPs) and one factorisation
+of I - c J (block cyclic reduction): O(k) for a string of k elements
+(``jaxstring._linalg``).
 
 How it fits into diffrax (static shapes, fixed-size solver state):
 
@@ -255,6 +257,10 @@ class BDF(dfx.AbstractAdaptiveSolver):
         return _linalg.choose_structure(_VF(), y, (t, terms, args), self.linear_solver)
 
     def _jacobian(self, terms, t, y, args, width):
+        if width == 1:
+            jac = _linalg.model_jacobian(terms, t, y, args)
+            if jac is not None:
+                return lax.stop_gradient(jac)
         fn = lambda u: terms.vf(t, u, args)
         _, lin = jax.linearize(fn, y)
         so = _linalg.declared_second_order(_VF(), y, (t, terms, args))

@@ -34,6 +34,7 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
 
 import math
 
+import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
@@ -43,7 +44,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array
 
-from ._scene import Scene
+from ._scene import Scene, scene_vector_field
 
 
 # Below this many unknowns the dense path is as fast (few JVPs either way) and has
@@ -569,12 +570,91 @@ def second_order_factor(mat: BlockTridiagonal) -> SecondOrderFactor:
     )
 
 
+class SecondOrderJacobian(eqx.Module):
+    """`a I + b J` for the Jacobian J = [[0, I], [P, Q]] of a vector field whose node
+    rows are (q, v) with dq/dt = v (d components each), stored as its v rows only:
+    P (d/dq) and Q (d/dv), block-tridiagonal with d x d blocks.
+
+    A model that knows this structure builds it directly
+    (`AbstractModel.vf_jacobian`), so neither the q rows nor the 2 d x 2 d blocks
+    are formed, and `factor` goes straight to the reduced system of
+    `SecondOrderFactor` without checking the q rows on the values.
+    """
+
+    p: BlockTridiagonal
+    q: BlockTridiagonal
+    a: Array
+    b: Array
+
+    @property
+    def second_order(self) -> int:
+        return self.p.b
+
+    def scale_shift(self, alpha, beta):
+        """alpha I + beta (a I + b J)."""
+        return SecondOrderJacobian(self.p, self.q, alpha + beta * self.a, beta * self.b)
+
+    def matvec(self, x):
+        d = self.p.b
+        xq, xv = x[:, :d], x[:, d:]
+        top = self.a * xq + self.b * xv
+        bottom = self.a * xv + self.b * (self.p.matvec(xq) + self.q.matvec(xv))
+        return jnp.concatenate([top, bottom], axis=1)
+
+    def to_dense(self):
+        n, d = self.p.n, self.p.b
+        P, Q = self.p.to_dense(), self.q.to_dense()
+        eye = jnp.eye(n * d, dtype=P.dtype)
+        M = jnp.block([[jnp.zeros_like(P), eye], [P, Q]])
+        M = self.a * jnp.eye(2 * n * d, dtype=P.dtype) + self.b * M
+        # (q block, v block) order -> node-major (q_i, v_i) rows and columns
+        perm = np.arange(2 * n * d).reshape(2, n, d).transpose(1, 0, 2).reshape(-1)
+        return M[perm][:, perm]
+
+
+def _second_order_jacobian_factor(mat: SecondOrderJacobian) -> "SecondOrderFactor":
+    """The reduced factorisation of `a I + b [[0, I], [P, Q]]`: the v rows become
+    (a I + b Q - (b^2 / a) P) v = s - (b / a) P r (see `SecondOrderFactor`)."""
+    n, d = mat.p.n, mat.p.b
+    a, b = mat.a, mat.b
+    ratio = b / a
+    eye = jnp.eye(d, dtype=mat.p.diag.dtype)
+    pb = lambda x: b * x
+    S = BlockTridiagonal(
+        b * mat.q.lower - (b * ratio) * mat.p.lower,
+        a * eye + b * mat.q.diag - (b * ratio) * mat.p.diag,
+        b * mat.q.upper - (b * ratio) * mat.p.upper,
+        n,
+        d,
+        1,
+    )
+    P = BlockTridiagonal(pb(mat.p.lower), pb(mat.p.diag), pb(mat.p.upper), n, d, 1)
+    full = lambda x: jnp.broadcast_to(x, (n,))
+    return SecondOrderFactor(bcr_factor(S), P, full(1.0 / a), full(ratio))
+
+
 def declared_second_order(fn, y, args=None) -> int:
     """d > 0 when the scene's model (found as in `declared_width`) declares the
     (q, v) node layout with dq/dt = v (`AbstractModel.second_order`) and `y` has
     the scene's state shape; else 0."""
     scene = _declared_scene(fn, y, args)
     return 0 if scene is None else int(scene.model.second_order(scene.effects))
+
+
+def model_jacobian(terms, t, y, args):
+    """The model's own Jacobian (`AbstractModel.vf_jacobian`) when the ODE is a
+    scene's vector field (as `simulate` builds it), else None."""
+    # diffrax's internal WrapTerm (for the direction of time): vf(t) = term.vf(d t)
+    while hasattr(terms, "term") and hasattr(terms, "direction"):
+        t, terms = t * terms.direction, terms.term
+    if not (
+        isinstance(terms, dfx.ODETerm)
+        and terms.vector_field is scene_vector_field
+        and isinstance(args, Scene)
+        and tuple(y.shape) == tuple(args.y0.shape)
+    ):
+        return None
+    return args.model.vf_jacobian(t, y, args.effects)
 
 
 def jacobian(fn, y, width, linear_fn=None, second_order=0):
@@ -589,7 +669,10 @@ def jacobian(fn, y, width, linear_fn=None, second_order=0):
 
 
 def factor(mat):
-    """Factorise a `DenseJacobian`-like or `BlockTridiagonal` matrix."""
+    """Factorise a `DenseJacobian`-like, `BlockTridiagonal` or
+    `SecondOrderJacobian` matrix."""
+    if isinstance(mat, SecondOrderJacobian):
+        return _second_order_jacobian_factor(mat)
     if isinstance(mat, BlockTridiagonal):
         if mat.second_order:
             return second_order_factor(mat)

@@ -72,3 +72,15 @@ class AbstractModel(eqx.Module):
         factorisations would only cost time."""
         del effects
         return False
+
+    def vf_jacobian(self, t, y, effects):
+        """The Jacobian of `vector_field` at `(t, y)` as a
+        `jaxstring._linalg.BlockTridiagonal` (one node per block), if the model can
+        build it more cheaply than the implicit solvers' coloured JVPs (3 b of them
+        for b components a node), else None. Default: None.
+
+        A model that returns a matrix must return the exact Jacobian under
+        `effects` (tests/test_fast_solvers.py compares it with the JVP-built one)
+        and None for any effect it does not know."""
+        del t, y, effects
+        return None

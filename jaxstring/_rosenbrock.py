@@ -214,9 +214,13 @@ class Rodas5P(dfx.AbstractAdaptiveSolver):
         h = t1 - t0
         vf = _VF()
         width = _linalg.choose_structure(vf, y0, (t0, terms, args), self.linear_solver)
-        f0, lin = jax.linearize(lambda y: terms.vf(t0, y, args), y0)
-        so = _linalg.declared_second_order(vf, y0, (t0, terms, args))
-        jac = _linalg.jacobian(lambda y: terms.vf(t0, y, args), y0, width, lin, so)
+        jac = _linalg.model_jacobian(terms, t0, y0, args) if width == 1 else None
+        if jac is None:
+            f0, lin = jax.linearize(lambda y: terms.vf(t0, y, args), y0)
+            so = _linalg.declared_second_order(vf, y0, (t0, terms, args))
+            jac = _linalg.jacobian(lambda y: terms.vf(t0, y, args), y0, width, lin, so)
+        else:
+            f0 = terms.vf(t0, y0, args)
         # df/dt by one JVP in t (zero for autonomous scenes, and cheap).
         _, dT = jax.jvp(lambda t: terms.vf(t, y0, args), (t0,), (jnp.ones_like(t0),))
         fac = _linalg.factor(jac.scale_shift(1.0 / (h * _GAMMA), -1.0))

@@ -4,6 +4,7 @@ import functools
 import math
 
 import diffrax as dfx
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _linalg
+from jaxstring._effects import AbstractLoad, Loads
 from jaxstring._fixed_step import Newmark, ThetaMethod
 from jaxstring._root_finder import StageNewton
 from jaxstring._rosenbrock import Rodas5P
@@ -476,3 +478,94 @@ def test_ynnpack_fusions_are_off_in_jaxstrings_compilations():
     users = jax.jit(f).lower(x).compile().as_text()
     if "ynn_fusion" not in users:
         pytest.skip("this jaxlib makes no YNNPACK fusion here anyway")
+
+
+# ---------------------------------------------------------------------------
+# The displacement string's own element-wise Jacobian (`vf_jacobian`)
+# ---------------------------------------------------------------------------
+
+
+def _dense_jacobian(scene, y, t=0.0):
+    n, b = y.shape
+    f = lambda v: scene.vector_field(t, v.reshape(n, b)).reshape(-1)
+    return np.asarray(jax.jacfwd(f)(y.reshape(-1)))
+
+
+@pytest.mark.parametrize("dim", (2, 3))
+@pytest.mark.parametrize(
+    "effects",
+    [("gravity", "kelvin_voigt"), ("gravity", "kelvin_voigt", "slack"), ()],
+)
+def test_model_jacobian_equals_autodiff(dim, effects):
+    # Random states with stretched, compressed (slack: no force) and moving
+    # elements: the written-out element derivatives equal jacfwd of the vector
+    # field to rounding.
+    scene = js.scenes.string_pendulum(k=9, dim=dim, EA=1e6, effects=effects)
+    rng = np.random.default_rng(dim + len(effects))
+    y = scene.y0 + 0.05 * jnp.asarray(rng.standard_normal(scene.y0.shape))
+    eps, _ = scene.model.strain(y)
+    assert np.any(eps < 0) and np.any(eps > 0)
+    jac = scene.model.vf_jacobian(0.0, y, scene.effects)
+    assert isinstance(jac, _linalg.SecondOrderJacobian)
+    assert jac.p.diag.shape == (9, dim, dim)
+    J = _dense_jacobian(scene, y)
+    err = np.max(np.abs(np.asarray(jac.to_dense()) - J)) / np.max(np.abs(J))
+    assert err < 1e-13, err
+    # The matrix-vector product and the shift agree with the dense matrix.
+    x = rng.standard_normal(y.shape)
+    M = jac.scale_shift(2.0, -0.3)
+    mv = np.asarray(M.matvec(jnp.asarray(x))).reshape(-1)
+    dense = (2.0 * np.eye(J.shape[0]) - 0.3 * J) @ x.reshape(-1)
+    assert np.max(np.abs(mv - dense)) / np.max(np.abs(dense)) < 1e-13
+
+
+@pytest.mark.parametrize("a, b", [(1.0, -1e-3), (100.0, -1.0)])
+def test_model_jacobian_factor_equals_dense_solve(a, b):
+    # BDF's I - c J and Rodas5P's I / (h gamma) - J, factorised straight from the
+    # model's v rows: backward stable, and equal to the dense solve.
+    scene = js.scenes.string_pendulum(k=11, EA=1e6)
+    rng = np.random.default_rng(5)
+    y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
+    fac = _linalg.factor(
+        scene.model.vf_jacobian(0.0, y, scene.effects).scale_shift(a, b)
+    )
+    M = a * np.eye(y.size) + b * _dense_jacobian(scene, y)
+    rhs = rng.standard_normal(y.shape)
+    x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+    backward = np.max(np.abs(M @ x - rhs.reshape(-1))) / (
+        np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(x))
+    )
+    assert backward < 1e-15, backward
+    dense = np.linalg.solve(M, rhs.reshape(-1))
+    assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-8
+
+
+class ZeroLoad(AbstractLoad):
+    """A load jaxstring's string does not know (and that adds nothing): the model
+    then gives no Jacobian of its own and the solvers probe with JVPs."""
+
+    def loads(self, t, kin, model):
+        return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))
+
+    def potential(self, y, kin, model):
+        return jnp.zeros((), y.dtype)
+
+
+@pytest.mark.parametrize("solver", ("bdf", "rodas5p"))
+def test_solvers_with_the_model_jacobian_equal_the_probed_one(solver):
+    # The same scene solved with the model's Jacobian and, through an unknown (zero)
+    # load, with the coloured-JVP one: same steps, same answer, and both at the
+    # Kvaerno5 reference's accuracy.
+    ref = _reference("displacement", 6, 1e4, 0.4)
+    scene = js.scenes.string_pendulum("displacement", k=6, EA=1e4, t1=0.4)
+    probed = eqx.tree_at(lambda s: s.effects, scene, scene.effects + (ZeroLoad(),))
+    assert scene.model.vf_jacobian(0.0, scene.y0, scene.effects) is not None
+    assert probed.model.vf_jacobian(0.0, probed.y0, probed.effects) is None
+    kw = dict(rtol=1e-8, atol=1e-8, ts=ref.ts)
+    a = js.simulate(scene, solver, **kw)
+    b = js.simulate(probed, solver, **kw)
+    assert a.ok and b.ok
+    assert int(a.stats["num_steps"]) == int(b.stats["num_steps"])
+    diff = float(np.max(np.abs(np.asarray(a.ys) - np.asarray(b.ys))))
+    assert diff < 1e-9, diff
+    assert _err(a, ref) < 1e-6, _err(a, ref)
