@@ -33,6 +33,7 @@ from _common import new_figure, savefig, write_table  # sets XLA_FLAGS
 import jaxstring
 from jaxstring import _linalg
 from jaxstring._bdf import BDF
+from jaxstring._effects import AbstractLoad, Loads
 from jaxstring._simulate import scene_vector_field
 
 
@@ -110,23 +111,46 @@ def pieces(k, n):
     return row
 
 
+class ZeroLoad(AbstractLoad):
+    """A load the string does not know and that adds nothing: under it the model
+    gives no Jacobian of its own (`vf_jacobian` is None), so the solvers probe
+    the vector field with 12 coloured JVPs, as before session 10."""
+
+    def loads(self, t, kin, model):
+        return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))
+
+    def potential(self, y, kin, model):
+        return jnp.zeros((), y.dtype)
+
+
 def simulate_per_step(k, t1):
+    """Per-step wall time of a short release with the model's Jacobian and with
+    the probed one (the same scene plus `ZeroLoad`), runs interleaved, best of 3."""
     sc = jaxstring.scenes.string_pendulum(
         formulation="displacement", k=k, EA=1e6, t1=t1
     )
+    probed = eqx.tree_at(lambda s: s.effects, sc, sc.effects + (ZeroLoad(),))
     ts = np.linspace(0.0, t1, 5)
-    run = lambda: jax.block_until_ready(
-        jaxstring.simulate(sc, "bdf", rtol=1e-7, atol=1e-7, ts=ts, max_steps=10**6)
-    )
-    run()
-    run()  # the first execution can be slow without YNNPACK (README)
-    best, traj = np.inf, None
+    runs = {
+        name: lambda s=scene: jax.block_until_ready(
+            jaxstring.simulate(s, "bdf", rtol=1e-7, atol=1e-7, ts=ts, max_steps=10**6)
+        )
+        for name, scene in (("model", sc), ("probed", probed))
+    }
+    for run in runs.values():
+        run()
+        run()  # the first execution can be slow without YNNPACK (README)
+    best = {name: np.inf for name in runs}
+    steps = {}
     for _ in range(3):
-        t = time.perf_counter()
-        traj = run()
-        best = min(best, time.perf_counter() - t)
-    steps = int(traj.stats["num_steps"])
-    return best / steps * 1e6, steps
+        for name, run in runs.items():
+            t = time.perf_counter()
+            traj = run()
+            best[name] = min(best[name], time.perf_counter() - t)
+            steps[name] = int(traj.stats["num_steps"])
+    assert steps["model"] == steps["probed"], steps
+    n = steps["model"]
+    return best["model"] / n * 1e6, best["probed"] / n * 1e6, n
 
 
 def main(quick=False):
@@ -137,7 +161,14 @@ def main(quick=False):
         row = pieces(k, n)
         # a short release: about 1000-4000 steps at each k
         t1 = {40: 1.0, 160: 0.5, 640: 0.15, 1280: 0.1}[k]
-        row["simulate_step_us"], row["simulate_steps"] = simulate_per_step(k, t1)
+        (
+            row["simulate_step_us"],
+            row["simulate_probed_step_us"],
+            row["simulate_steps"],
+        ) = simulate_per_step(k, t1)
+        row["model_over_probed"] = (
+            row["simulate_step_us"] / row["simulate_probed_step_us"]
+        )
         row["simulate_t1"] = t1
         rows.append(row)
         print(
@@ -145,14 +176,18 @@ def main(quick=False):
             f"model jac {row['model_jacobian_us']:.1f} "
             f"factor {row['factor_us']:.1f} solve {row['solve_us']:.1f} "
             f"step {row['bdf_step_us']:.0f} simulate/step "
-            f"{row['simulate_step_us']:.0f} us",
+            f"{row['simulate_step_us']:.0f} us (probed J "
+            f"{row['simulate_probed_step_us']:.0f} us)",
             flush=True,
         )
     r0, r1 = rows[0], rows[-1]
     notes = [
         "Times in microseconds per call inside one compiled loop (best of 5), "
         "after compilation; simulate_step_us: wall time of a short simulate "
-        "(release start, rtol = atol = 1e-7, t1 = simulate_t1 s) over its steps.",
+        "(release start, rtol = atol = 1e-7, t1 = simulate_t1 s) over its steps; "
+        "simulate_probed_step_us: the same with the probed Jacobian (the scene plus "
+        "a zero load the model does not know), runs interleaved in this process; "
+        "model_over_probed: their ratio (same step counts, asserted).",
         "jacobian_us: the generic probe (12 coloured JVPs of the vector field); "
         "model_jacobian_us: the string's element-wise Jacobian, the one the solvers "
         "use; factor_us factorises I - c J from it.",
@@ -171,7 +206,15 @@ def main(quick=False):
     write_table(
         name,
         rows,
-        ["k", "n_states", *TIMES, "simulate_steps", "simulate_t1"],
+        [
+            "k",
+            "n_states",
+            *TIMES,
+            "simulate_probed_step_us",
+            "model_over_probed",
+            "simulate_steps",
+            "simulate_t1",
+        ],
         "Cost of one BDF step and its pieces vs k (displacement, EA = 1e6)",
         notes,
     )
