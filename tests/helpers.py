@@ -59,3 +59,29 @@ def zero_crossings(t, x):
 def fitted_order(hs, errors):
     """Slope of log(error) against log(h) by least squares."""
     return float(np.polyfit(np.log(hs), np.log(errors), 1)[0])
+
+
+# The string pendulum's alpha and EA, as `_fit` getters.
+ALPHA_EA = (
+    ("alpha", lambda s: s.effects[1].alpha),
+    ("EA", lambda s: s.model.EA),
+)
+
+
+def assert_grad_matches_central_differences(
+    loss_fn, scene, grad, getters=ALPHA_EA, rel_step=1e-4, rtol=1e-5
+):
+    """Each `grad[name]` against the central difference of `loss_fn(scene)` in the
+    parameter `get(scene)`, with step `rel_step` times the parameter (truncation
+    ~ rel_step^2, rounding ~ solver tolerance / rel_step)."""
+    import equinox as eqx
+
+    loss = eqx.filter_jit(loss_fn)
+    for name, get in getters:
+        p = float(get(scene))
+        h = rel_step * p
+        plus = float(loss(eqx.tree_at(get, scene, jnp.asarray(p + h))))
+        minus = float(loss(eqx.tree_at(get, scene, jnp.asarray(p - h))))
+        fd = (plus - minus) / (2 * h)
+        rel = abs(float(grad[name]) - fd) / abs(fd)
+        assert rel < rtol, f"d/d{name}: {float(grad[name])} vs {fd}"

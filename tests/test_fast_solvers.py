@@ -18,7 +18,11 @@ from jaxstring._root_finder import StageNewton
 from jaxstring._rosenbrock import Rodas5P
 from jaxstring._string import DisplacementString
 
-from .helpers import FORMULATIONS, fitted_order
+from .helpers import (
+    FORMULATIONS,
+    assert_grad_matches_central_differences,
+    fitted_order,
+)
 
 
 # ---------------------------------------------------------------------------
@@ -601,15 +605,6 @@ def test_rodas5p_gradient_through_the_model_jacobian():
         atol=1e-10,
         n_save=5,
     )
-    loss = eqx.filter_jit(lambda s: end(_fit.solve(s, config), s))
-    for name, get in [
-        ("alpha", lambda s: s.effects[1].alpha),
-        ("EA", lambda s: s.model.EA),
-    ]:
-        p = float(get(scene))
-        h = 1e-4 * p
-        plus = float(loss(eqx.tree_at(get, scene, jnp.asarray(p + h))))
-        minus = float(loss(eqx.tree_at(get, scene, jnp.asarray(p - h))))
-        fd = (plus - minus) / (2 * h)
-        rel = abs(float(grad[name]) - fd) / abs(fd)
-        assert rel < 1e-5, f"d/d{name}: {float(grad[name])} vs {fd}"
+    assert_grad_matches_central_differences(
+        lambda s: end(_fit.solve(s, config), s), scene, grad
+    )
