@@ -64,6 +64,7 @@ import optimistix as optx
 from jaxtyping import PyTree, Scalar
 
 from . import _linalg
+from ._scene import Scene
 
 
 class _NoAux(eqx.Module):
@@ -119,6 +120,37 @@ def _explicit_stage(args) -> bool:
     if isinstance(diagonal, jax.core.Tracer) or not hasattr(diagonal, "shape"):
         return False
     return diagonal.shape == () and bool(diagonal == 0)
+
+
+def _stage_model_jacobian(u, args):
+    """The Jacobian of diffrax's implicit Runge-Kutta stage relation at `u` from the
+    model's own Jacobian (`AbstractModel.vf_jacobian`), else None.
+
+    diffrax's f-space relation (8 arguments, its ESDIRKs: Kvaerno) is
+    `g(f) = f - vf(t_i, y_i + a prod(f, dt), args)`; for an ODE term, prod(f, dt) =
+    f dt, so its Jacobian is `I - a dt J(t_i, y_i + a f dt)`. diffrax passes `vf`
+    and `prod` closure-converted, so which term they belong to cannot be seen:
+    the model's Jacobian is taken when the ODE's `args` are a `Scene`, and at run
+    time `vf` must equal the scene's vector field and `prod` the product f dt
+    (one vector field more per Jacobian), or the matrix is NaN and the Newton
+    iteration fails loudly, as `SecondOrderFactor` does for a wrong structure.
+    Any other relation, or a model without its own Jacobian, gives None: the
+    Jacobian is probed with JVPs as before."""
+    if not (isinstance(args, tuple) and len(args) == 8):
+        return None
+    _, diagonal, vf, prod, ti, yi, inner, control = args
+    if not isinstance(inner, Scene):
+        return None
+    if not (jnp.shape(control) == () and jnp.shape(yi) == jnp.shape(u)):
+        return None
+    step = prod(u, control)
+    y_at = yi + diagonal * step
+    jac = inner.model.vf_jacobian(ti, y_at, inner.effects)
+    if jac is None:
+        return None
+    same = jnp.array_equal(vf(ti, y_at, inner), inner.vector_field(ti, y_at))
+    same = same & jnp.array_equal(step, u * control)
+    return jac.scale_shift(1.0, jnp.where(same, -diagonal * control, jnp.nan))
 
 
 def _identity_like(struct):
@@ -201,8 +233,10 @@ class StageNewton(optx.AbstractRootFinder):
             fac = batched_factor(noaux, y, args, self.linear_solver)
             return lax.stop_gradient(fac)
         width = _linalg.choose_structure(noaux, y, args, self.linear_solver)
-        so = _linalg.declared_second_order(noaux, y, args)
-        jac = _linalg.jacobian(lambda u: noaux(u, args), y, width, second_order=so)
+        jac = _stage_model_jacobian(y, args) if width == 1 else None
+        if jac is None:
+            so = _linalg.declared_second_order(noaux, y, args)
+            jac = _linalg.jacobian(lambda u: noaux(u, args), y, width, second_order=so)
         fac = _linalg.factor(jac)
         return lax.stop_gradient(fac)
 
