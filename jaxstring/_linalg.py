@@ -586,10 +586,6 @@ class SecondOrderJacobian(eqx.Module):
     a: Array
     b: Array
 
-    @property
-    def second_order(self) -> int:
-        return self.p.b
-
     def scale_shift(self, alpha, beta):
         """alpha I + beta (a I + b J)."""
         return SecondOrderJacobian(self.p, self.q, alpha + beta * self.a, beta * self.b)
@@ -619,7 +615,6 @@ def _second_order_jacobian_factor(mat: SecondOrderJacobian) -> "SecondOrderFacto
     a, b = mat.a, mat.b
     ratio = b / a
     eye = jnp.eye(d, dtype=mat.p.diag.dtype)
-    pb = lambda x: b * x
     S = BlockTridiagonal(
         b * mat.q.lower - (b * ratio) * mat.p.lower,
         a * eye + b * mat.q.diag - (b * ratio) * mat.p.diag,
@@ -628,7 +623,7 @@ def _second_order_jacobian_factor(mat: SecondOrderJacobian) -> "SecondOrderFacto
         d,
         1,
     )
-    P = BlockTridiagonal(pb(mat.p.lower), pb(mat.p.diag), pb(mat.p.upper), n, d, 1)
+    P = BlockTridiagonal(b * mat.p.lower, b * mat.p.diag, b * mat.p.upper, n, d, 1)
     full = lambda x: jnp.broadcast_to(x, (n,))
     return SecondOrderFactor(bcr_factor(S), P, full(1.0 / a), full(ratio))
 

@@ -192,11 +192,16 @@ class DisplacementString(AbstractString):
         v = jnp.concatenate([zero, y[:, self.dim :]], axis=0)
         return Kinematics(positions=r, velocities=v)
 
-    def _elements(self, kin):
+    def _rows(self, kin):
+        """D+ r and D+ r', one row per element."""
         h = self.l / self.k
-        d = jnp.diff(kin.positions, axis=0) / h  # D+ r, one row per element
-        dv = jnp.diff(kin.velocities, axis=0) / h
-        return _element_strains(d, dv)
+        return (
+            jnp.diff(kin.positions, axis=0) / h,
+            jnp.diff(kin.velocities, axis=0) / h,
+        )
+
+    def _elements(self, kin):
+        return _element_strains(*self._rows(kin))
 
     def strain(self, y):
         eps, eps_dot, _ = self._elements(self.kinematics(y))
@@ -243,9 +248,7 @@ class DisplacementString(AbstractString):
         _, laws = split_effects(effects)
         k, dim = self.k, self.dim
         h = self.l / k
-        kin = self.kinematics(y)
-        d = jnp.diff(kin.positions, axis=0) / h
-        dv = jnp.diff(kin.velocities, axis=0) / h
+        d, dv = self._rows(self.kinematics(y))
         eps, eps_dot, t_ = _element_strains(d, dv)
         # N and its partial derivatives from two element-wise JVPs of the laws.
         law = lambda e, ed: apply_laws(laws, self.EA, e, ed)
