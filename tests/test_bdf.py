@@ -331,25 +331,50 @@ def test_stored_jacobian_skipped_only_where_it_keeps_failing():
     assert n_angle < 4, n_angle
 
 
-def test_difference_row_helpers_equal_tensordot_and_cumsum():
-    """The unrolled row combinations of the difference array (used instead of a
-    `dot` and a `cumsum`, which XLA:CPU runs as separate kernels) are the same
-    sums, to rounding."""
-    from jaxstring._bdf import _change_matrix, _combine, _rev_cumsum
+def _scipy_step(D, order, factor, d):
+    """scipy's BDF (``scipy/integrate/_ivp/bdf.py``) on the difference array:
+    ``change_D``, the predictor and history term, and the update of an accepted
+    step, transcribed with numpy."""
+    from jaxstring._bdf import _ALPHA, _GAMMA
 
-    rng = np.random.default_rng(3)
-    D = jnp.asarray(rng.standard_normal((8, 7, 4)))
-    T = _change_matrix(jnp.asarray(3), jnp.asarray(0.7))
-    np.testing.assert_allclose(
-        _combine(T, D[:6]), jnp.tensordot(T, D[:6], axes=1), rtol=0, atol=1e-13
-    )
-    w = jnp.asarray(rng.standard_normal(5))
-    np.testing.assert_allclose(
-        _combine(w, D[1:6]), jnp.tensordot(w, D[1:6], axes=1), rtol=0, atol=1e-13
-    )
-    np.testing.assert_allclose(
-        _rev_cumsum(D),
-        np.cumsum(np.asarray(D)[::-1], axis=0)[::-1],
-        rtol=0,
-        atol=1e-13,
-    )
+    def compute_R(order, factor):
+        I = np.arange(1, order + 1)[:, None]
+        J = np.arange(1, order + 1)
+        M = np.zeros((order + 1, order + 1))
+        M[1:, 1:] = (I - 1 - factor * J) / I
+        M[0] = 1
+        return np.cumprod(M, axis=0)
+
+    D = np.array(D)
+    RU = compute_R(order, factor).dot(compute_R(order, 1))
+    D[: order + 1] = np.tensordot(RU.T, D[: order + 1], axes=1)
+    y_pred = np.sum(D[: order + 1], axis=0)
+    psi = np.tensordot(_GAMMA[1 : order + 1], D[1 : order + 1], axes=1) / _ALPHA[order]
+    D[order + 2] = d - D[order + 1]
+    D[order + 1] = d
+    for i in reversed(range(order + 1)):
+        D[i] += D[i + 1]
+    return y_pred, psi, D
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 5])
+def test_step_weights_equal_scipys_difference_updates(order):
+    """The step's linear maps on the rows of D (`_step_weights`: the rescaling
+    folded into the predictor, the history term and the update of an accepted
+    step, applied by the unrolled `_combine`) give scipy's BDF sequence on the
+    rescaled array, to rounding, for shrinking, equal and growing steps."""
+    from jaxstring._bdf import _combine, _step_weights
+
+    rng = np.random.default_rng(order)
+    D = rng.standard_normal((8, 7, 4))
+    d = rng.standard_normal((7, 4))
+    for factor in (0.4, 1.0, 1.9):
+        W, e, w_pred, w_psi = _step_weights(
+            jnp.asarray(order), jnp.asarray(factor), jnp.float64
+        )
+        y_ref, psi_ref, D_ref = _scipy_step(D, order, factor, d)
+        Dj = jnp.asarray(D)
+        np.testing.assert_allclose(_combine(w_pred, Dj), y_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(_combine(w_psi, Dj), psi_ref, rtol=0, atol=1e-12)
+        D_acc = _combine(W, Dj) + e[:, None, None] * d
+        np.testing.assert_allclose(D_acc, D_ref, rtol=0, atol=1e-12)
