@@ -206,7 +206,7 @@ class BDFInterpolation(dfx.AbstractLocalInterpolation):
 
     t0: jax.Array
     t1: jax.Array
-    D: jax.Array  # (MAX_ORDER + 1, *y.shape), rows above `order` are not used
+    D: jax.Array  # (MAX_ORDER + 3, *y.shape), rows above `order` are not used
     order: jax.Array
 
     def evaluate(self, t0, t1=None, left: bool = True):
@@ -217,7 +217,7 @@ class BDFInterpolation(dfx.AbstractLocalInterpolation):
         m = jnp.arange(MAX_ORDER)
         x = (t0 - (self.t1 - m * h)) / ((m + 1) * h)
         p = jnp.where(m + 1 <= self.order, jnp.cumprod(x), 0.0)
-        return self.D[0] + _combine(p, self.D[1:])
+        return self.D[0] + _combine(p, self.D[1 : MAX_ORDER + 1])
 
 
 class _VF(eqx.Module):
@@ -465,13 +465,17 @@ class BDF(dfx.AbstractAdaptiveSolver):
         n_acc = n_equal + 1
 
         # Order selection after q + 1 equal steps (scipy), from the scaled RMS norms
-        # of the rows of D_acc (one reduction over D_acc).
+        # of the four rows of D_acc it reads, q - 1 ... q + 2 (one reduction).
         ecs = lax.stop_gradient(D_acc)
-        rms_rows = jnp.sqrt(
-            jnp.mean((ecs / scale_new) ** 2, axis=tuple(range(1, ecs.ndim)))
+        lo = order - 1
+        near = lax.dynamic_slice_in_dim(ecs, lo, 4, axis=0)
+        rms_near = jnp.sqrt(
+            jnp.mean((near / scale_new) ** 2, axis=tuple(range(1, ecs.ndim)))
         )
-        err_m = ec[order - 1] * jnp.take(rms_rows, order)
-        err_p = ec[jnp.minimum(order + 1, MAX_ORDER)] * jnp.take(rms_rows, order + 2)
+        # The scaled RMS norm of row j of D_acc, for q - 1 <= j <= q + 2, j >= 1.
+        n_of = lambda j: jnp.take(rms_near, jnp.maximum(j, 1) - lo)
+        err_m = ec[order - 1] * n_of(order)
+        err_p = ec[jnp.minimum(order + 1, MAX_ORDER)] * n_of(order + 2)
         err_m = jnp.where(order > 1, err_m, jnp.inf)
         err_p = jnp.where(order < self.max_order, err_p, jnp.inf)
         norms = jnp.stack([err_m, err_norm, err_p])
@@ -486,7 +490,6 @@ class BDF(dfx.AbstractAdaptiveSolver):
         # amplify it. Such a mode shows as backward differences that stop falling
         # with the order. Then drop the order by one (down to the A-stable 2) at
         # once, and raise it to >= 3 only while the differences fall clearly.
-        n_of = lambda j: jnp.take(rms_rows, jnp.clip(j, 1, MAX_ORDER + 2))
         ratio_q = jnp.maximum(
             n_of(order + 1) / n_of(order), n_of(order) / n_of(order - 1)
         )
@@ -530,7 +533,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             h_cap=h_cap,
             n_refresh=jnp.where(refreshed, st.n_refresh + 1, 0).astype(jnp.int32),
         )
-        dense_info = dict(D=D_acc[: MAX_ORDER + 1], order=order)
+        dense_info = dict(D=D_acc, order=order)
         # A failed Newton iteration is an error only if the controller keeps the step
         # (diffrax ignores the result of rejected steps).
         result = dfx.RESULTS.where(
