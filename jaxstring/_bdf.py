@@ -170,8 +170,8 @@ def _step_weights(order, factor, dtype):
 
     Computing these from the stored D in one pass each (``_combine``) replaces the
     rescaled copy of D, its concatenation with the last rows, and the stacked
-    reverse cumulative sum: on XLA:CPU those concatenations were separate passes
-    over D that did not vectorise (k = 1280: about 200 us of a 700 us step).
+    reverse cumulative sum: on XLA:CPU those concatenations were slow separate
+    passes over D (k = 1280, per-operation profile: about 200 us of a step).
     """
     n = MAX_ORDER + 3
     T6 = _change_matrix(order, factor)
