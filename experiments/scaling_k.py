@@ -153,8 +153,7 @@ def main(
                 best = min(js, key=lambda r: r["run_s"])["solver"]
             active = [a for a in active if "[" in a or a == best]
     if rounds > 0:
-        again = [(r, sc, n) for r, sc, n in timed_again if r["ok"]]
-        again = [(r, sc, n) for r, sc, n in again if n == best or len(candidates) == 1]
+        again = [(r, sc, n) for r, sc, n in timed_again if r["ok"] and n == best]
         runs = {id(r): [] for r, _, _ in again}
         for i in range(rounds):
             for r, sc, n in again:

@@ -332,24 +332,17 @@ def test_stored_jacobian_skipped_only_where_it_keeps_failing():
 
 
 def _scipy_step(D, order, factor, d):
-    """scipy's BDF (``scipy/integrate/_ivp/bdf.py``) on the difference array:
-    ``change_D``, the predictor and history term, and the update of an accepted
-    step, transcribed with numpy."""
+    """scipy's BDF on a 2D difference array: its own ``change_D``, then the
+    predictor, history term and accepted-step update of ``BDF._step_impl``
+    (``scipy/integrate/_ivp/bdf.py``), written out with numpy."""
+    from scipy.integrate._ivp.bdf import change_D
+
     from jaxstring._bdf import _ALPHA, _GAMMA
 
-    def compute_R(order, factor):
-        I = np.arange(1, order + 1)[:, None]
-        J = np.arange(1, order + 1)
-        M = np.zeros((order + 1, order + 1))
-        M[1:, 1:] = (I - 1 - factor * J) / I
-        M[0] = 1
-        return np.cumprod(M, axis=0)
-
     D = np.array(D)
-    RU = compute_R(order, factor).dot(compute_R(order, 1))
-    D[: order + 1] = np.tensordot(RU.T, D[: order + 1], axes=1)
+    change_D(D, order, factor)
     y_pred = np.sum(D[: order + 1], axis=0)
-    psi = np.tensordot(_GAMMA[1 : order + 1], D[1 : order + 1], axes=1) / _ALPHA[order]
+    psi = np.dot(D[1 : order + 1].T, _GAMMA[1 : order + 1]) / _ALPHA[order]
     D[order + 2] = d - D[order + 1]
     D[order + 1] = d
     for i in reversed(range(order + 1)):
@@ -366,8 +359,8 @@ def test_step_weights_equal_scipys_difference_updates(order):
     from jaxstring._bdf import _combine, _step_weights
 
     rng = np.random.default_rng(order)
-    D = rng.standard_normal((8, 7, 4))
-    d = rng.standard_normal((7, 4))
+    D = rng.standard_normal((8, 28))  # 2D, as scipy's change_D expects
+    d = rng.standard_normal(28)
     for factor in (0.4, 1.0, 1.9):
         W, e, w_pred, w_psi = _step_weights(
             jnp.asarray(order), jnp.asarray(factor), jnp.float64
@@ -376,5 +369,5 @@ def test_step_weights_equal_scipys_difference_updates(order):
         Dj = jnp.asarray(D)
         np.testing.assert_allclose(_combine(w_pred, Dj), y_ref, rtol=0, atol=1e-12)
         np.testing.assert_allclose(_combine(w_psi, Dj), psi_ref, rtol=0, atol=1e-12)
-        D_acc = _combine(W, Dj) + e[:, None, None] * d
+        D_acc = _combine(W, Dj) + e[:, None] * d
         np.testing.assert_allclose(D_acc, D_ref, rtol=0, atol=1e-12)
