@@ -21,8 +21,8 @@ Two starts (``--start``):
   measures the cost per step.
 
 Run: ``python experiments/scaling_k.py [--quick] [--formulation displacement]
-[--start swing] [--peers cvode-BDF] [--rounds 3]`` (``--rounds``: re-time the
-jaxstring runs in interleaved rounds, see ``main``).
+[--start swing] [--peers cvode-BDF] [--rounds 3] [--tol 1e-6]`` (``--rounds``:
+re-time the jaxstring runs in interleaved rounds, see ``main``).
 """
 
 import os
@@ -284,6 +284,7 @@ if __name__ == "__main__":
         "--peers", default=None, help="comma list of cvode-BDF, scipy-Radau; 'none'"
     )
     p.add_argument("--budget", type=float, default=90.0)
+    p.add_argument("--tol", type=float, default=1e-7, help="rtol = atol")
     p.add_argument(
         "--rounds", type=int, default=0, help="re-time in interleaved rounds (main doc)"
     )
@@ -302,4 +303,5 @@ if __name__ == "__main__":
         peers=peers,
         budget_s=a.budget,
         rounds=a.rounds,
+        tol=a.tol,
     )

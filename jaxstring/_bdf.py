@@ -35,7 +35,8 @@ How it fits into diffrax (static shapes, fixed-size solver state):
   correction by 2 / (1 + c / c_lu) for c != c_lu, as done here). J is evaluated at
   the predictor and I - c J factorised afresh when the Newton iteration fails with
   the stored factorisation (scipy), or when c = h / alpha_q has changed by more
-  than 30 % since the last factorisation. The state keeps the factorisation only,
+  than 30 % since the last factorisation (also on the first step: `init` stores
+  a placeholder with c_lu = inf). The state keeps the factorisation only,
   not J: scipy and CVODE refactorise a stored J on a change of c, but every array
   of the solver state is copied through diffrax's accept/reject select and the
   while loop, and J is the largest (48 doubles a node of a 2D string; at k = 640
@@ -297,16 +298,21 @@ class BDF(dfx.AbstractAdaptiveSolver):
     def init(self, terms, t0, t1, y0, args):
         h = jnp.asarray(t1 - t0, dtype=y0.dtype)
         width = self._width(terms, t0, y0, args)
-        jac = self._jacobian(terms, t0, y0, args, width)
-        c = h / _ALPHA[1]
-        lu = _linalg.factor(jac.scale_shift(1.0, -c))
+        # No factorisation here: a placeholder of the factorisation's structure with
+        # c_lu = inf, which the first step sees as a changed c and so factorises
+        # afresh at its predictor. (One Jacobian and factorisation fewer in the
+        # compiled program: each is a few hundred XLA operations.)
+        fresh = lambda: _linalg.factor(
+            self._jacobian(terms, t0, y0, args, width).scale_shift(1.0, -h)
+        )
+        lu = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(fresh))
         return BDFState(
             D=self._start(terms, t0, h, y0, args),
             h=h,
             order=jnp.array(1, jnp.int32),
             n_equal=jnp.array(0, jnp.int32),
             lu=lu,
-            c_lu=c,
+            c_lu=jnp.asarray(jnp.inf, h.dtype),
             h_next=h,
             h_cap=jnp.asarray(jnp.inf, h.dtype),
             n_refresh=jnp.array(0, jnp.int32),
@@ -347,6 +353,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         c = h / alpha
         scale = atol + rtol * jnp.abs(y_pred)
         width = self._width(terms, t1, y_pred, args)
+        second_order = _linalg.declared_second_order(_VF(), y0, (t1, terms, args))
 
         def residual(d):
             return c * terms.vf(t1, y_pred + d, args) - psi - d
@@ -362,11 +369,8 @@ class BDF(dfx.AbstractAdaptiveSolver):
             jac = self._jacobian(terms, t1, y_pred, args, width)
             return _linalg.factor(jac.scale_shift(1.0, -c))
 
-        lu0, c_lu0 = lax.cond(
-            stale_c, lambda: (fresh_factor(), c), lambda: (st.lu, st.c_lu)
-        )
-        lu0 = lax.stop_gradient(lu0)
-        c_lu0 = lax.stop_gradient(c_lu0)
+        lu0 = lax.stop_gradient(st.lu)
+        c_lu0 = lax.stop_gradient(st.c_lu)
 
         def newton(fn, d0, lu, c_lu):
             corr = 2.0 / (1.0 + c / c_lu)  # CVODE's chord scaling for c != c_lu
@@ -406,8 +410,12 @@ class BDF(dfx.AbstractAdaptiveSolver):
             return d, conv, k
 
         def solve(fn, d0):
+            # First the stored factorisation, unless it is being skipped or c has
+            # changed; then, if that did not converge, a fresh one. (One fresh
+            # factorisation in the program, not one per case: each is a Jacobian
+            # and a block cyclic reduction, a few hundred XLA operations.)
             d_a, conv_a, k_a = lax.cond(
-                skip,
+                skip | stale_c,
                 lambda: (d0, jnp.array(False), jnp.array(0, jnp.int32)),
                 lambda: newton(fn, d0, lu0, c_lu0),
             )
@@ -420,8 +428,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             def keep():
                 return d_a, conv_a, k_a, lu0, c_lu0
 
-            # A factorisation made fresh for a change of c is not made again.
-            d, conv, k, lu, c_lu = lax.cond(conv_a | stale_c, keep, refresh)
+            d, conv, k, lu, c_lu = lax.cond(conv_a, keep, refresh)
             # custom_root gives its aux output tangents of the aux dtype, which
             # JAX rejects for integers (float0 expected): pass them as floats.
             aux_tree = (conv, k, lu, c_lu, ~conv_a & ~stale_c)
@@ -431,7 +438,10 @@ class BDF(dfx.AbstractAdaptiveSolver):
 
         def tangent_solve(g, b):
             # g(v) = (c J - I) v at the solution; exact solve (derivative passes only).
-            mat = _linalg.jacobian(g, b, width, g)
+            # custom_root traces this with every step, gradient or not: the reduced
+            # second-order factorisation (2 x 2 closed-form blocks for a string)
+            # also keeps that tracing cheap.
+            mat = _linalg.jacobian(g, b, width, g, second_order)
             return _linalg.factor(mat).solve(b)
 
         aux_types = []
