@@ -446,6 +446,12 @@ def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
     return BCRFactor(tuple(levels), small_inv(D[0]))
 
 
+# `bcr_solve` and `factor` are jitted functions called inside the solvers' traces:
+# diffrax traces a solver's step three times, and a nested jit traces each of these
+# once per shape (a cache hit after that); XLA inlines them, so the compiled program
+# is the same. k = 40 pendulum, trace and lowering of `simulate`: BDF 3.6 -> 2.7 s,
+# Rodas5P 2.2 -> 1.6 s (3 fresh processes each).
+@jax.jit
 def bcr_solve(fac: BCRFactor, f):
     """Solve with a `bcr_factor` factorisation; `f` has shape (N, B)."""
     stack = []
@@ -663,6 +669,7 @@ def jacobian(fn, y, width, linear_fn=None, second_order=0):
     return block_tridiagonal_jacobian(fn, y, width, linear_fn, second_order)
 
 
+@jax.jit
 def factor(mat):
     """Factorise a `DenseJacobian`-like, `BlockTridiagonal` or
     `SecondOrderJacobian` matrix."""
