@@ -186,7 +186,10 @@ def test_banded_newton_solve_equals_dense(formulation, k, c):
     # metres next to metres per second), so two backward-stable solvers may differ
     # by up to cond * eps in the forward sense. Block cyclic reduction is backward
     # stable (normwise backward error at round-off), and with one step of
-    # iterative refinement it equals the (refined) dense LU solve to 1e-12.
+    # iterative refinement it equals the (refined) dense LU solve to 5e-12, seven
+    # orders below cond * eps. (Measured: at most 1.2e-12, displacement, k = 27,
+    # c = 1e-4, cond 1.3e11, with `factor` compiled as one XLA program as in the
+    # solvers; 5.6e-13 when it ran op by op.)
     fn, y, scene = _string_vf(formulation, k)
     n, b = y.shape
     J = np.asarray(
@@ -215,7 +218,7 @@ def test_banded_newton_solve_equals_dense(formulation, k, c):
     err = np.max(np.abs(np.asarray(refined).reshape(-1) - dense)) / np.max(
         np.abs(dense)
     )
-    assert err < 1e-12, err
+    assert err < 5e-12, err
 
 
 def test_block_inverse_pivots():
