@@ -51,7 +51,7 @@ from _common import (
 
 import jaxstring as js
 from jaxstring import _linalg
-from jaxstring._root_finder import StageNewton
+from jaxstring._solvers.stage_newton import StageNewton
 
 
 ADAPTIVE = (

@@ -7,7 +7,7 @@ compilation, and JAX's start-up is paid by a tiny warm-up solve first): the firs
 and a call with other parameter values (EA x 2, alpha x 2: must not recompile, so
 it costs a run). Compile time = first call - second call. Two modes: the band of
 the Newton matrix declared by the string model (`AbstractModel.node_bandwidth`,
-the default) and detected by probing (`jaxstring._linalg.detect_width`, which
+the default) and detected by probing (`jaxstring._linalg.banded.detect_width`, which
 compiles a probe at trace time).
 
 String pendulum, displacement variables, k = 40, EA = 1e6 N, alpha = 0.01 s, 2 s,

@@ -40,7 +40,7 @@ import _common as C
 
 import jaxstring as js
 from jaxstring import _fit
-from jaxstring._tether_scenes import tether_fixed
+from jaxstring.tether.scenes import tether_fixed
 
 
 T_HOLD, T_TOW = 10.0, 10.0

@@ -32,8 +32,8 @@ from _common import new_figure, savefig, write_table  # sets XLA_FLAGS
 
 import jaxstring
 from jaxstring import _linalg
-from jaxstring._bdf import BDF
-from jaxstring._effects import AbstractLoad, Loads
+from jaxstring._solvers.bdf import BDF
+from jaxstring.pendulum.effects import AbstractLoad, Loads
 from jaxstring._simulate import scene_vector_field
 
 

@@ -13,7 +13,7 @@ against its own loop, in the same process:
   - `lockstep, groups of 1`: every member its own step sequence inside one
     compiled `lax.map`, with diffrax's PID controller: the loop's steps (and equal
     to rounding) while `simulate` used that controller too; `same_steps_as_loop`
-    checks it (simulate's Kvaerno default is now `jaxstring._controller`'s
+    checks it (simulate's Kvaerno default is now `jaxstring._solvers.step_size`'s
     Newton-limited controller).
 * fixed step: implicit Euler with the paper's step 0.005 s (`implicit_euler_fixed`,
   damped full Newton on the banded Jacobian) and a stage Newton tolerance of 1e-10:
@@ -156,7 +156,7 @@ def profile(k, Ms, quick):
     import jax.numpy as jnp
 
     from jaxstring._fit import resolve
-    from jaxstring._root_finder import batched_factor
+    from jaxstring._solvers.stage_newton import batched_factor
     from jaxstring._sweep import _Batch
 
     reps = 20 if quick else 100

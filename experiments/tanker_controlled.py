@@ -25,9 +25,9 @@ import numpy as np
 
 import jaxstring as js
 from jaxstring import tanker_plot as tp
-from jaxstring._tanker_analysis import controlled_metrics
-from jaxstring._tanker_scenes import ENVIRONMENTS, tandem_controlled, tandem_model
-from jaxstring._vessel import fpso_hull, shuttle_hull
+from jaxstring.tandem.analysis import controlled_metrics
+from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled, tandem_model
+from jaxstring.tandem.vessels import fpso_hull, shuttle_hull
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))

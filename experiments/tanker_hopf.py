@@ -24,8 +24,8 @@ import numpy as np
 
 import jaxstring as js
 from jaxstring import tanker_plot as tp
-from jaxstring._tanker_analysis import hopf_sweep, measure_limit_cycle
-from jaxstring._tanker_scenes import tandem_hopf
+from jaxstring.tandem.analysis import hopf_sweep, measure_limit_cycle
+from jaxstring.tandem.scenes import tandem_hopf
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))

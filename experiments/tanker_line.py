@@ -34,9 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxstring as js
-from jaxstring._tandem_line import line_equilibrium, with_line
-from jaxstring._tanker_analysis import measure_limit_cycle
-from jaxstring._tanker_scenes import tandem_fishtail
+from jaxstring.tandem.line import line_equilibrium, with_line
+from jaxstring.tandem.analysis import measure_limit_cycle
+from jaxstring.tandem.scenes import tandem_fishtail
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -259,8 +259,8 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
 
 
 def controlled(quick):
-    from jaxstring._tanker_analysis import controlled_metrics
-    from jaxstring._tanker_scenes import ENVIRONMENTS, tandem_controlled
+    from jaxstring.tandem.analysis import controlled_metrics
+    from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled
 
     t1 = 4000.0 if quick else 6000.0
     sfx = "_quick" if quick else ""

@@ -30,11 +30,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxstring as js
-import jaxstring.tether_plot as tplot
-from jaxstring._hydro import Buoyancy, Drag, Weight
+import jaxstring.tether.plot as tplot
+from jaxstring.tether.effects import Buoyancy, Drag, Weight
 from jaxstring._scene import Scene
-from jaxstring._tether import AceamTether, ExactTether, FixedEnd
-from jaxstring._tether_scenes import tether_fixed, tether_winch
+from jaxstring.tether.models import AceamTether, ExactTether, FixedEnd
+from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 
 OUT = os.path.join(os.path.dirname(__file__), "results")

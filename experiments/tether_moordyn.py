@@ -94,7 +94,7 @@ import numpy as np
 from _common import new_figure, savefig, write_table
 
 import jaxstring as js
-from jaxstring._tether_scenes import tether_fixed
+from jaxstring.tether.scenes import tether_fixed
 
 
 # The scenario (paper Table 1); passed explicitly to tether_fixed and to MoorDyn.

@@ -56,8 +56,8 @@ import _common as C
 
 import jaxstring as js
 from jaxstring import _fit
-from jaxstring._tanker_analysis import controlled_metrics
-from jaxstring._tanker_scenes import ENVIRONMENTS, tandem_controlled
+from jaxstring.tandem.analysis import controlled_metrics
+from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled
 
 
 ENVS = tuple(ENVIRONMENTS)

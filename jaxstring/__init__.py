@@ -2,15 +2,34 @@
 
 from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
+    pendulum as pendulum,
     scenes as scenes,
+    tandem as tandem,
+    tether as tether,
 )
-from ._bdf import BDF as BDF
-from ._control import (
-    ComputedForcePD as ComputedForcePD,
-    NonlinearCompensator as NonlinearCompensator,
+from ._fit import (
+    FitResult as FitResult,
+    fit as fit,
+    gauss_newton as gauss_newton,
+    value_and_grad as value_and_grad,
 )
-from ._controller import NewtonLimitedController as NewtonLimitedController
-from ._effects import (
+from ._scene import Scene as Scene
+from ._simulate import simulate as simulate
+from ._solvers.bdf import BDF as BDF
+from ._solvers.fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
+from ._solvers.presets import ACCURACY_PRESETS as ACCURACY_PRESETS
+from ._solvers.registry import (
+    SOLVERS as SOLVERS,
+    Kvaerno3 as Kvaerno3,
+    Kvaerno4 as Kvaerno4,
+    Kvaerno5 as Kvaerno5,
+)
+from ._solvers.rosenbrock import Rodas5P as Rodas5P
+from ._solvers.stage_newton import StageNewton as StageNewton
+from ._solvers.step_size import NewtonLimitedController as NewtonLimitedController
+from ._sweep import SweepResult as SweepResult, sweep as sweep
+from ._trajectory import Trajectory as Trajectory
+from .pendulum.effects import (
     AbstractEffect as AbstractEffect,
     AbstractLoad as AbstractLoad,
     AbstractTensionLaw as AbstractTensionLaw,
@@ -20,50 +39,13 @@ from ._effects import (
     Loads as Loads,
     Slack as Slack,
 )
-from ._fit import (
-    FitResult as FitResult,
-    fit as fit,
-    gauss_newton as gauss_newton,
-    value_and_grad as value_and_grad,
-)
-from ._fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
-from ._hydro import (
-    AbstractCurrent as AbstractCurrent,
-    AbstractTetherLoad as AbstractTetherLoad,
-    Buoyancy as Buoyancy,
-    DepthProfileCurrent as DepthProfileCurrent,
-    Drag as Drag,
-    FunctionCurrent as FunctionCurrent,
-    TetherKinematics as TetherKinematics,
-    UniformCurrent as UniformCurrent,
-    Weight as Weight,
-)
-from ._presets import ACCURACY_PRESETS as ACCURACY_PRESETS
-from ._root_finder import StageNewton as StageNewton
-from ._rosenbrock import Rodas5P as Rodas5P
-from ._scene import Scene as Scene
-from ._simulate import simulate as simulate
-from ._solvers import (
-    SOLVERS as SOLVERS,
-    Kvaerno3 as Kvaerno3,
-    Kvaerno4 as Kvaerno4,
-    Kvaerno5 as Kvaerno5,
-)
-from ._string import (
+from .pendulum.models import (
     AbstractString as AbstractString,
     DisplacementString as DisplacementString,
     NaturalAngleString as NaturalAngleString,
     NaturalTangentString as NaturalTangentString,
 )
-from ._sweep import SweepResult as SweepResult, sweep as sweep
-from ._tandem_line import (
-    TandemLine as TandemLine,
-    hawser_line as hawser_line,
-    line_equilibrium as line_equilibrium,
-    static_line as static_line,
-    with_line as with_line,
-)
-from ._tanker_analysis import (
+from .tandem.analysis import (
     controlled_metrics as controlled_metrics,
     find_equilibria as find_equilibria,
     find_equilibria_map as find_equilibria_map,
@@ -73,23 +55,18 @@ from ._tanker_analysis import (
     solve_equilibrium as solve_equilibrium,
     stability as stability,
 )
-from ._tether import (
-    AbstractEnd as AbstractEnd,
-    AbstractTether as AbstractTether,
-    AceamTether as AceamTether,
-    CoupledEnd as CoupledEnd,
-    EndKinematics as EndKinematics,
-    ExactTether as ExactTether,
-    FixedEnd as FixedEnd,
-    FreeEnd as FreeEnd,
-    LmsTether as LmsTether,
-    PiecewiseLinear as PiecewiseLinear,
-    PrescribedEnd as PrescribedEnd,
-    arc_state as arc_state,
-    hanging_state as hanging_state,
+from .tandem.autopilot import (
+    ComputedForcePD as ComputedForcePD,
+    NonlinearCompensator as NonlinearCompensator,
 )
-from ._trajectory import Trajectory as Trajectory
-from ._vessel import (
+from .tandem.line import (
+    TandemLine as TandemLine,
+    hawser_line as hawser_line,
+    line_equilibrium as line_equilibrium,
+    static_line as static_line,
+    with_line as with_line,
+)
+from .tandem.vessels import (
     AbstractActuator as AbstractActuator,
     AbstractVesselLoad as AbstractVesselLoad,
     ConstantThrust as ConstantThrust,
@@ -104,6 +81,32 @@ from ._vessel import (
     fpso_hull as fpso_hull,
     make_hull as make_hull,
     shuttle_hull as shuttle_hull,
+)
+from .tether.effects import (
+    AbstractCurrent as AbstractCurrent,
+    AbstractTetherLoad as AbstractTetherLoad,
+    Buoyancy as Buoyancy,
+    DepthProfileCurrent as DepthProfileCurrent,
+    Drag as Drag,
+    FunctionCurrent as FunctionCurrent,
+    TetherKinematics as TetherKinematics,
+    UniformCurrent as UniformCurrent,
+    Weight as Weight,
+)
+from .tether.models import (
+    AbstractEnd as AbstractEnd,
+    AbstractTether as AbstractTether,
+    AceamTether as AceamTether,
+    CoupledEnd as CoupledEnd,
+    EndKinematics as EndKinematics,
+    ExactTether as ExactTether,
+    FixedEnd as FixedEnd,
+    FreeEnd as FreeEnd,
+    LmsTether as LmsTether,
+    PiecewiseLinear as PiecewiseLinear,
+    PrescribedEnd as PrescribedEnd,
+    arc_state as arc_state,
+    hanging_state as hanging_state,
 )
 
 

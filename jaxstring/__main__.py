@@ -1,6 +1,6 @@
 """``python -m jaxstring``: the command line (see `jaxstring.cli`)."""
 
-from .cli import main
+from .cli.main import main
 
 
 raise SystemExit(main())

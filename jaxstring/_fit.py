@@ -31,12 +31,12 @@ import jax.tree_util as jtu
 import numpy as np
 import optax
 
-from ._controller import make_controller
 from ._jit import cpu_jit
-from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
 from ._simulate import _solve, observables
-from ._solvers import build_solver, check_solver, is_adaptive
+from ._solvers.projected import ProjectedSolver
+from ._solvers.registry import build_solver, check_solver, is_adaptive
+from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int, check_positive
 

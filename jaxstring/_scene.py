@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._effects import AbstractEffect
 from ._model import AbstractModel
 from ._validate import check_finite, is_concrete
+from .pendulum.effects import AbstractEffect
 
 
 class Scene(eqx.Module):

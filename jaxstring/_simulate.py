@@ -5,12 +5,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._controller import STEP_CONTROLS, make_controller
 from ._jit import cpu_jit
-from ._presets import ACCURACY_PRESETS
-from ._projection import ProjectedSolver
 from ._scene import Scene, scene_vector_field
-from ._solvers import build_solver, check_solver, is_adaptive
+from ._solvers.presets import ACCURACY_PRESETS
+from ._solvers.projected import ProjectedSolver
+from ._solvers.registry import build_solver, check_solver, is_adaptive
+from ._solvers.step_size import STEP_CONTROLS, make_controller
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int, check_positive, is_concrete
 

@@ -79,15 +79,15 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from ._controller import make_controller
 from ._fit import SolveConfig, resolve, solve
-from ._fixed_step import ThetaMethod
 from ._jit import cpu_jit
-from ._projection import ProjectedSolver
-from ._root_finder import StageNewton
 from ._scene import Scene
 from ._simulate import observables
-from ._solvers import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
+from ._solvers.fixed_step import ThetaMethod
+from ._solvers.projected import ProjectedSolver
+from ._solvers.registry import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
+from ._solvers.stage_newton import StageNewton
+from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int
 

@@ -1,11 +1,15 @@
-"""Named scenes with the source papers' default parameters."""
+"""Named scenes with the source papers' default parameters (one entry point per scene).
 
-import math
+Each system's namespace holds its own scenes (`jaxstring.pendulum.string_pendulum`,
+`jaxstring.tether.tether_fixed`, `jaxstring.tandem.tandem_fishtail`, ...); this module
+gathers them under one name.
+"""
 
-from ._effects import EFFECTS, Gravity, KelvinVoigt, Slack
-from ._scene import Scene
-from ._string import FORMULATIONS
-from ._tanker_scenes import (
+from .pendulum.scenes import (
+    DEFAULT_PENDULUM_EFFECTS as DEFAULT_PENDULUM_EFFECTS,
+    string_pendulum as string_pendulum,
+)
+from .tandem.scenes import (
     ENVIRONMENTS as TANDEM_ENVIRONMENTS,  # noqa: F401  (re-export)
     tandem_controlled as tandem_controlled,
     tandem_equilibria as tandem_equilibria,
@@ -13,87 +17,4 @@ from ._tanker_scenes import (
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
 )
-from ._tether_scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
-from ._validate import (
-    check_angle,
-    check_choice,
-    check_finite,
-    check_int,
-    check_nonnegative,
-    check_positive,
-)
-
-
-DEFAULT_PENDULUM_EFFECTS = ("gravity", "kelvin_voigt")
-
-
-def string_pendulum(
-    formulation: str = "displacement",
-    k: int = 40,
-    EA: float = 1e6,
-    alpha: float = 0.01,
-    l: float = 1.0,
-    mu: float = 1.0,
-    m_s: float = 1.0,
-    g: float = 9.81,
-    theta0: float = math.pi / 2,
-    t1: float = 2.0,
-    dim: int = 2,
-    effects=DEFAULT_PENDULUM_EFFECTS,
-    y0=None,
-) -> Scene:
-    """The string pendulum of Poth et al.: a viscoelastic string with an end mass.
-
-    **Arguments:**
-
-    - `formulation`: `"displacement"` (eqs 11-14), `"natural"` (strain + Cartesian
-      tangent, eqs 15-23, 2D/3D) or `"angle"` (strain + tangent angle, 2D).
-    - `k`: number of elements (>= 2).
-    - `EA`: axial stiffness, N (> 0). `alpha`: Kelvin-Voigt constant, s (>= 0).
-    - `l`: unstrained length, m. `mu`: mass per length, kg/m. `m_s`: end mass, kg.
-    - `g`: gravity along -y, m/s^2.
-    - `theta0`: release angle from the downward vertical, rad; pi/2 is straight and
-      horizontal to the right, at rest and unstrained (the paper's figures).
-    - `t1`: end time, s. `dim`: 2 or 3.
-    - `effects`: names from `"gravity"`, `"kelvin_voigt"`, `"slack"` (or effect
-      instances); only these are computed. Default: gravity and Kelvin-Voigt.
-    - `y0`: an initial state in the model's layout, instead of the release at `theta0`.
-    """
-    check_choice("formulation", formulation, tuple(FORMULATIONS))
-    check_int("k", k, 2)
-    check_positive("EA", EA, "N")
-    check_nonnegative("alpha", alpha, "s")
-    check_positive("l", l, "m")
-    check_positive("mu", mu, "kg/m")
-    check_positive("m_s", m_s, "kg")
-    check_nonnegative("g", g, "m/s^2")
-    check_angle("theta0", theta0)
-    check_positive("t1", t1, "s")
-    if dim not in (2, 3):
-        raise ValueError(f"`dim` must be 2 or 3; got {dim!r}.")
-    if isinstance(effects, str):
-        effects = (effects,)
-    built = []
-    for e in effects:
-        if isinstance(e, str):
-            check_choice("effect", e, tuple(EFFECTS))
-            if e == "gravity":
-                built.append(Gravity(g=g))
-            elif e == "kelvin_voigt":
-                built.append(KelvinVoigt(alpha=alpha))
-            elif e == "slack":
-                built.append(Slack())
-        else:
-            built.append(e)
-    model = FORMULATIONS[formulation](l=l, mu=mu, m_s=m_s, EA=EA, k=k, dim=dim)
-    if y0 is None:
-        y0 = model.initial_state(theta0)
-    else:
-        check_finite("y0", y0)
-    return Scene(
-        model=model,
-        effects=tuple(built),
-        y0=y0,
-        t1=t1,
-        name=f"string-pendulum/{formulation}",
-    )
+from .tether.scenes import tether_fixed as tether_fixed, tether_winch as tether_winch

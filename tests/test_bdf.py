@@ -1,4 +1,4 @@
-"""Variable-order BDF (jaxstring._bdf): convergence order, accuracy against
+"""Variable-order BDF (jaxstring._solvers.bdf): convergence order, accuracy against
 references, the stiff string pendulum, steps against scipy's BDF, grad and vmap."""
 
 import diffrax as dfx
@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxstring as js
-from jaxstring._bdf import BDF
+from jaxstring._solvers.bdf import BDF
 
 from .helpers import fitted_order
 
@@ -337,7 +337,7 @@ def _scipy_step(D, order, factor, d):
     (``scipy/integrate/_ivp/bdf.py``), written out with numpy."""
     from scipy.integrate._ivp.bdf import change_D
 
-    from jaxstring._bdf import _ALPHA, _GAMMA
+    from jaxstring._solvers.bdf import _ALPHA, _GAMMA
 
     D = np.array(D)
     change_D(D, order, factor)
@@ -356,7 +356,7 @@ def test_step_weights_equal_scipys_difference_updates(order):
     folded into the predictor, the history term and the update of an accepted
     step, applied by the unrolled `_combine`) give scipy's BDF sequence on the
     rescaled array, to rounding, for shrinking, equal and growing steps."""
-    from jaxstring._bdf import _combine, _step_weights
+    from jaxstring._solvers.bdf import _combine, _step_weights
 
     rng = np.random.default_rng(order)
     D = rng.standard_normal((8, 28))  # 2D, as scipy's change_D expects

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from jaxstring.cli import main
+from jaxstring.cli.main import main
 
 
 FAST = ["run", "string-pendulum", "--k", "6", "--EA", "1e4", "--t1", "0.3"]

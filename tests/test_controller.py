@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._controller import NewtonLimitedController, make_controller
-from jaxstring._root_finder import StageNewton
+from jaxstring._solvers.step_size import NewtonLimitedController, make_controller
+from jaxstring._solvers.stage_newton import StageNewton
 
 
 K, EA, T1 = 10, 1e8, 0.5

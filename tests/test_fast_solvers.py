@@ -12,11 +12,11 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit, _linalg
-from jaxstring._effects import AbstractLoad, Loads
-from jaxstring._fixed_step import Newmark, ThetaMethod
-from jaxstring._root_finder import StageNewton
-from jaxstring._rosenbrock import Rodas5P
-from jaxstring._string import DisplacementString
+from jaxstring.pendulum.effects import AbstractLoad, Loads
+from jaxstring._solvers.fixed_step import Newmark, ThetaMethod
+from jaxstring._solvers.stage_newton import StageNewton
+from jaxstring._solvers.rosenbrock import Rodas5P
+from jaxstring.pendulum.models import DisplacementString
 
 from .helpers import (
     FORMULATIONS,
@@ -346,7 +346,7 @@ def test_stage_jacobians_cut_kvaerno5_attempts():
 def test_identity_factor_of_the_explicit_stage(structure):
     # The explicit first stage of an ESDIRK gets the identity factor (no Jacobian):
     # it must solve as the identity, with the structure of a real factorisation.
-    from jaxstring._root_finder import _identity_like
+    from jaxstring._solvers.stage_newton import _identity_like
 
     fn, y, scene = _string_vf("displacement", 16)
     width = None if structure == "dense" else 1
@@ -622,7 +622,7 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     # field its Jacobian is I - a dt J from the model; with another vector field and
     # the scene as args (vf is opaque to the root finder) the matrix is NaN, so the
     # Newton iteration fails instead of using the wrong Jacobian.
-    from jaxstring._root_finder import _stage_model_jacobian
+    from jaxstring._solvers.stage_newton import _stage_model_jacobian
 
     scene = js.scenes.string_pendulum(k=14, EA=1e4)
     rng = np.random.default_rng(7)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._fixed_step import _newton
+from jaxstring._solvers.fixed_step import _newton
 
 from .helpers import fitted_order, run
 

@@ -18,7 +18,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _linalg
-from jaxstring._root_finder import batched_factor
+from jaxstring._solvers.stage_newton import batched_factor
 from jaxstring._sweep import member_rms_max, sweep
 
 

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._tandem_line import (
+from jaxstring.tandem.line import (
     TandemLine,
     hawser_line,
     line_equilibrium,
     static_line,
     with_line,
 )
-from jaxstring._tanker_scenes import tandem_fishtail, tandem_fpso_alone
-from jaxstring._tether import LmsTether
-from jaxstring._vessel import Hawser
+from jaxstring.tandem.scenes import tandem_fishtail, tandem_fpso_alone
+from jaxstring.tether.models import LmsTether
+from jaxstring.tandem.vessels import Hawser
 
 
 # A line of negligible mass (0.01 kg/m; its added mass, 21 kg/m, is 1e-5 of the
@@ -153,7 +153,7 @@ def test_bad_input():
 
 
 def test_cli_takes_hawser_line_only_where_it_applies(tmp_path, capsys):
-    from jaxstring.tanker_cli import run_tanker
+    from jaxstring.cli.tandem import run_tanker
 
     assert run_tanker("tandem-hopf", str(tmp_path), True, hawser="line") == 2
     assert run_tanker("tandem-fishtail", str(tmp_path), True, hawser="rope") == 2

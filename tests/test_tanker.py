@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._control import NonlinearCompensator, outputs
-from jaxstring._tanker_analysis import (
+from jaxstring.tandem.autopilot import NonlinearCompensator, outputs
+from jaxstring.tandem.analysis import (
     classify,
     controlled_metrics,
     counts,
@@ -26,7 +26,7 @@ from jaxstring._tanker_analysis import (
     pitchfork_sweep,
     stability,
 )
-from jaxstring._tanker_scenes import (
+from jaxstring.tandem.scenes import (
     ENVIRONMENTS,
     tandem_controlled,
     tandem_equilibria,
@@ -35,7 +35,7 @@ from jaxstring._tanker_scenes import (
     tandem_hopf,
     tandem_model,
 )
-from jaxstring._vessel import (
+from jaxstring.tandem.vessels import (
     ConstantThrust,
     Hawser,
     MooredFPSO,
@@ -272,7 +272,7 @@ def test_S1_opposing_wind_mirror_pairs_and_jackknife(V_w):
     # Jacobian) of the load balance. Two mirror-image stable jack-knifed states:
     # FPSO nearly beam-on (|psi1| ~ 90-104 deg), shuttle at 23-50 deg the other
     # way [P]. Admissible and stable counts as the spec (7 and 2).
-    from jaxstring._tanker_analysis import q_from_state, residual
+    from jaxstring.tandem.analysis import q_from_state, residual
 
     sc = tandem_equilibria(V_w=V_w, Delta_w_deg=180.0)
     eqs = equilibria(V_w, 180.0)
@@ -338,7 +338,7 @@ S1_SPEC = {
 
 @pytest.mark.slow
 def test_S1_full_table():
-    from jaxstring.tanker_cli import equilibrium_table
+    from jaxstring.cli.tandem import equilibrium_table
 
     cells = sorted(S1_SPEC)
     results = equilibrium_table(cells)

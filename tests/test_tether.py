@@ -15,7 +15,7 @@ import pytest
 import scipy.optimize
 
 import jaxstring as js
-from jaxstring._hydro import (
+from jaxstring.tether.effects import (
     Buoyancy,
     DepthProfileCurrent,
     Drag,
@@ -25,7 +25,7 @@ from jaxstring._hydro import (
     Weight,
 )
 from jaxstring._scene import Scene
-from jaxstring._tether import (
+from jaxstring.tether.models import (
     AceamTether,
     CoupledEnd,
     EndKinematics,
@@ -38,7 +38,7 @@ from jaxstring._tether import (
     hanging_state,
     thomas,
 )
-from jaxstring._tether_scenes import tether_fixed, tether_winch
+from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 
 G = 9.81

@@ -14,7 +14,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit
-from jaxstring._tanker_scenes import tandem_controlled
+from jaxstring.tandem.scenes import tandem_controlled
 
 
 sys.path.insert(

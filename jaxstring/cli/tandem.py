@@ -35,7 +35,7 @@ LINE_SCENES = ("tandem-fishtail", "tandem-controlled")
 
 
 def _solver_of(scene):
-    from ._tandem_line import TandemLine
+    from ..tandem.line import TandemLine
 
     if isinstance(scene.model, TandemLine):
         return LINE_SOLVER, LINE_TOL
@@ -51,7 +51,7 @@ def _sim(scene, n_save, max_steps=2_000_000):
     import jax
     import jax.numpy as jnp
 
-    from ._simulate import simulate
+    from .._simulate import simulate
 
     solver, tol = _solver_of(scene)
     ts = jnp.linspace(float(scene.t0), float(scene.t1), n_save)
@@ -75,9 +75,9 @@ def _write_csv(path, header, rows):
 def _fpso_alone(out_dir, quick):
     import numpy as np
 
-    from . import tanker_plot as tp
-    from ._tanker_analysis import pitchfork_sweep
-    from ._tanker_scenes import tandem_fpso_alone
+    from ..tandem import plot as tp
+    from ..tandem.analysis import pitchfork_sweep
+    from ..tandem.scenes import tandem_fpso_alone
 
     xs = np.linspace(0.30, 0.45, 7 if quick else 16)
     xs, lead, x_star = pitchfork_sweep(
@@ -156,8 +156,8 @@ S1_SPEC = {
 def equilibrium_table(cells):
     """find_equilibria for each (V_w, Delta_w) cell; one compiled vmapped call
     for the windy cells, one for the current-only cell."""
-    from ._tanker_analysis import find_equilibria, find_equilibria_map
-    from ._tanker_scenes import tandem_equilibria
+    from ..tandem.analysis import find_equilibria, find_equilibria_map
+    from ..tandem.scenes import tandem_equilibria
 
     out = {}
     windy = [c for c in cells if c[0] > 0]
@@ -175,9 +175,9 @@ def equilibrium_table(cells):
 def _equilibria(out_dir, quick):
     import numpy as np
 
-    from . import tanker_plot as tp
-    from ._tanker_analysis import counts, stability
-    from ._tanker_scenes import tandem_equilibria
+    from ..tandem import plot as tp
+    from ..tandem.analysis import counts, stability
+    from ..tandem.scenes import tandem_equilibria
 
     cells = S1_CELLS_QUICK if quick else S1_CELLS_FULL
     start = time.perf_counter()
@@ -223,9 +223,9 @@ def _equilibria(out_dir, quick):
 
 
 def _fishtail(out_dir, quick, hawser="massless"):
-    from . import tanker_plot as tp
-    from ._tanker_analysis import measure_limit_cycle
-    from ._tanker_scenes import tandem_fishtail
+    from ..tandem import plot as tp
+    from ..tandem.analysis import measure_limit_cycle
+    from ..tandem.scenes import tandem_fishtail
 
     t1 = 30000.0 if quick else 60000.0
     sc = tandem_fishtail(t1=t1, hawser=hawser)
@@ -274,9 +274,9 @@ def _fishtail(out_dir, quick, hawser="massless"):
 def _hopf(out_dir, quick):
     import numpy as np
 
-    from . import tanker_plot as tp
-    from ._tanker_analysis import hopf_sweep, measure_limit_cycle
-    from ._tanker_scenes import tandem_hopf
+    from ..tandem import plot as tp
+    from ..tandem.analysis import hopf_sweep, measure_limit_cycle
+    from ..tandem.scenes import tandem_hopf
 
     Fs = np.linspace(0.0, 60e3, 7 if quick else 13)
     Fs, eqs, lead, F_star = hopf_sweep(lambda F: tandem_hopf(F_ast=F), Fs)
@@ -327,9 +327,9 @@ def _hopf(out_dir, quick):
 
 
 def _controlled(out_dir, quick, hawser="massless"):
-    from . import tanker_plot as tp
-    from ._tanker_analysis import controlled_metrics
-    from ._tanker_scenes import ENVIRONMENTS, tandem_controlled
+    from ..tandem import plot as tp
+    from ..tandem.analysis import controlled_metrics
+    from ..tandem.scenes import ENVIRONMENTS, tandem_controlled
 
     t1 = 4000.0 if quick else 6000.0
     lines = [

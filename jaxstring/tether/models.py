@@ -52,16 +52,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._geometry import safe_norm
-from ._hydro import AbstractTetherLoad, TetherKinematics
-from ._model import AbstractModel
-from ._validate import (
+from .._geometry import safe_norm
+from .._model import AbstractModel
+from .._validate import (
     check_finite,
     check_int,
     check_nonnegative,
     check_positive,
     is_concrete,
 )
+from .effects import AbstractTetherLoad, TetherKinematics
 
 
 # Inactive (coiled) elements relax to the drum with this time constant, s: slow

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _linalg
+from .. import _linalg
 
 
 _GAMMA = 0.21193756319429014

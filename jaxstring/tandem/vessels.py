@@ -35,9 +35,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._effects import AbstractEffect
-from ._model import AbstractModel
-from ._validate import check_finite, check_nonnegative, check_positive, is_concrete
+from .._model import AbstractModel
+from .._validate import check_finite, check_nonnegative, check_positive, is_concrete
+from ..pendulum.effects import AbstractEffect
 
 
 RHO_WATER = 1025.0  # kg/m^3 [S1]

@@ -22,8 +22,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._geometry import down
-from ._validate import check_nonnegative
+from .._geometry import down
+from .._validate import check_nonnegative
 
 
 class Kinematics(eqx.Module):

@@ -63,8 +63,8 @@ import jax.tree_util as jtu
 import optimistix as optx
 from jaxtyping import PyTree, Scalar
 
-from . import _linalg
-from ._scene import Scene
+from .. import _linalg
+from .._scene import Scene
 
 
 class _NoAux(eqx.Module):

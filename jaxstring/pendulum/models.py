@@ -22,7 +22,11 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._effects import (
+from .._geometry import direction, safe_norm
+from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
+from .._model import AbstractModel
+from .._validate import check_int, check_positive
+from .effects import (
     Gravity,
     KelvinVoigt,
     Kinematics,
@@ -32,10 +36,6 @@ from ._effects import (
     split_effects,
     total_loads,
 )
-from ._geometry import direction, safe_norm
-from ._linalg import BlockTridiagonal, SecondOrderJacobian
-from ._model import AbstractModel
-from ._validate import check_int, check_positive
 
 
 def _param():

@@ -44,7 +44,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array
 
-from ._scene import Scene, scene_vector_field
+from .._scene import Scene, scene_vector_field
 
 
 # Below this many unknowns the dense path is as fast (few JVPs either way) and has

@@ -90,7 +90,7 @@ import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _linalg
+from .. import _linalg
 
 
 MAX_ORDER = 5

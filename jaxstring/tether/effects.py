@@ -23,9 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._effects import AbstractEffect
-from ._geometry import safe_norm
-from ._validate import check_finite, check_nonnegative, is_concrete
+from .._geometry import safe_norm
+from .._validate import check_finite, check_nonnegative, is_concrete
+from ..pendulum.effects import AbstractEffect
 
 
 def _f64(x):

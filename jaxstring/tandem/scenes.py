@@ -9,11 +9,11 @@ import math
 
 import jax.numpy as jnp
 
-from ._control import ComputedForcePD, NonlinearCompensator
-from ._scene import Scene
-from ._tandem_line import HAWSER_KINDS, with_line
-from ._validate import check_choice, check_finite, check_nonnegative, check_positive
-from ._vessel import (
+from .._scene import Scene
+from .._validate import check_choice, check_finite, check_nonnegative, check_positive
+from .autopilot import ComputedForcePD, NonlinearCompensator
+from .line import HAWSER_KINDS, with_line
+from .vessels import (
     AbstractVesselLoad,
     ConstantThrust,
     Hawser,

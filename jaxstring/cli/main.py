@@ -39,7 +39,7 @@ class SceneRunner:
 
 
 def _pendulum_arguments(p: argparse.ArgumentParser) -> None:
-    from ._string import FORMULATIONS
+    from ..pendulum.models import FORMULATIONS
 
     p.add_argument(
         "--formulation",
@@ -69,8 +69,7 @@ def _pendulum_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _pendulum_build(a: argparse.Namespace):
-    from . import scenes
-
+    from .. import scenes
     effects = tuple(scenes.DEFAULT_PENDULUM_EFFECTS)
     if a.slack:
         effects = effects + ("slack",)
@@ -141,8 +140,7 @@ def _tether_arguments(p: argparse.ArgumentParser) -> None:
 
 def _tether_build(name: str):
     def build(a: argparse.Namespace):
-        from . import scenes
-
+        from .. import scenes
         return getattr(scenes, name)(
             method=a.method, N=a.N, t1=a.t1, smoothing=a.smoothing, k_lms=a.k_lms
         )
@@ -155,8 +153,7 @@ def _tether_parameters(a: argparse.Namespace) -> dict:
 
 
 def _tether_figure(traj, path, title=""):
-    from . import tether_plot
-
+    from ..tether import plot as tether_plot
     return tether_plot.summary_figure(traj, path, title=title)
 
 
@@ -179,7 +176,7 @@ for _name, _fn, _help in (
 
 
 def _common_arguments(p: argparse.ArgumentParser, solver: str = "kvaerno5") -> None:
-    from ._solvers import SOLVERS
+    from .._solvers.registry import SOLVERS
 
     p.add_argument(
         "--solver", choices=tuple(SOLVERS), default=solver, help="ODE solver"
@@ -217,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp = scene_parsers.add_parser(name, help=runner.help, description=runner.help)
         runner.add_arguments(sp)
         _common_arguments(sp, runner.solver)
-    from .tanker_cli import TANKER_SCENES
+    from .tandem import TANKER_SCENES
 
     for name in TANKER_SCENES:
         sp = scene_parsers.add_parser(name, help=f"FPSO + shuttle tandem ({name})")
@@ -258,8 +255,8 @@ def _run_scene(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
     import numpy as np
 
-    from . import plot
-    from ._simulate import simulate
+    from .._simulate import simulate
+    from ..pendulum import plot as plot
 
     t0, t1 = float(scene.t0), float(scene.t1)
     n_save = max(int(round((t1 - t0) / SAVE_DT)) + 1, 2)
@@ -387,7 +384,7 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "run":
-        from .tanker_cli import TANKER_SCENES, run_tanker
+        from .tandem import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:
             return run_tanker(args.scene, args.out, args.quick, args.hawser)

@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._scene import Scene
-from ._vessel import Hawser, Tandem, hull_clearance, rot, wrap
+from .._scene import Scene
+from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
 
 
 LSCALE = 100.0  # m

@@ -41,16 +41,16 @@ Choices the paper leaves open (stated here so that they can be changed):
 import jax.numpy as jnp
 import numpy as np
 
-from ._hydro import Buoyancy, Drag, UniformCurrent, Weight
-from ._scene import Scene
-from ._tether import (
+from .._scene import Scene
+from .._validate import check_choice, check_int, check_nonnegative, check_positive
+from .effects import Buoyancy, Drag, UniformCurrent, Weight
+from .models import (
     TETHER_METHODS,
     FixedEnd,
     PiecewiseLinear,
     PrescribedEnd,
     arc_state,
 )
-from ._validate import check_choice, check_int, check_nonnegative, check_positive
 
 
 TANGENTIAL_AREAS = ("projected", "wetted")

@@ -40,7 +40,7 @@ import jax
 import jax.lax as lax
 import jax.numpy as jnp
 
-from . import _linalg
+from .. import _linalg
 
 
 NEWTON_KINDS = ("chord", "full")

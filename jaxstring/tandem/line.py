@@ -32,11 +32,11 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._hydro import AbstractTetherLoad, Buoyancy, Drag, UniformCurrent, Weight
-from ._model import AbstractModel
-from ._tether import AbstractTether, CoupledEnd, EndKinematics, LmsTether
-from ._validate import check_finite, check_int, check_positive
-from ._vessel import (
+from .._model import AbstractModel
+from .._validate import check_finite, check_int, check_positive
+from ..tether.effects import AbstractTetherLoad, Buoyancy, Drag, UniformCurrent, Weight
+from ..tether.models import AbstractTether, CoupledEnd, EndKinematics, LmsTether
+from .vessels import (
     AbstractActuator,
     AbstractVesselLoad,
     Hawser,
@@ -360,7 +360,7 @@ def with_line(
     leaves out weight and buoyancy, `c_n = c_t = 0` the drag). The vessels start
     where the scene's do; the line starts in its static shape between the
     fairleads. A controller keeps the massless hawser as its model of the line."""
-    from ._scene import Scene
+    from .._scene import Scene
 
     if not isinstance(scene.model, Tandem):
         raise ValueError("`with_line` needs a Tandem scene (with a Hawser).")

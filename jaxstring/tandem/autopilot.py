@@ -14,8 +14,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._validate import check_nonnegative, check_positive
-from ._vessel import (
+from .._validate import check_nonnegative, check_positive
+from .vessels import (
     AbstractActuator,
     current_velocity,
     point_acceleration,

@@ -5,11 +5,11 @@ from typing import ClassVar
 import diffrax as dfx
 from diffrax._solver.runge_kutta import CalculateJacobian
 
-from ._bdf import BDF
-from ._fixed_step import Newmark, ThetaMethod
-from ._root_finder import StageNewton
-from ._rosenbrock import Rodas5P
-from ._validate import check_choice
+from .._validate import check_choice
+from .bdf import BDF
+from .fixed_step import Newmark, ThetaMethod
+from .rosenbrock import Rodas5P
+from .stage_newton import StageNewton
 
 
 # name -> (description, adaptive step size?, implicit?)

@@ -1,0 +1,29 @@
+"""Linear algebra of implicit steps on chain-structured Jacobians.
+
+A chain couples each node to its neighbours only, so the Newton matrix of an implicit
+step is banded (block tridiagonal with one node per block). Factorising it by block
+cyclic reduction costs O(k) per step instead of the O(k^3) of a dense LU.
+"""
+
+from .banded import (
+    MIN_BANDED_SIZE as MIN_BANDED_SIZE,
+    BandedFactor as BandedFactor,
+    BCRFactor as BCRFactor,
+    BlockTridiagonal as BlockTridiagonal,
+    DenseFactor as DenseFactor,
+    DenseJacobian as DenseJacobian,
+    SecondOrderFactor as SecondOrderFactor,
+    SecondOrderJacobian as SecondOrderJacobian,
+    bcr_factor as bcr_factor,
+    bcr_solve as bcr_solve,
+    block_tridiagonal_jacobian as block_tridiagonal_jacobian,
+    choose_structure as choose_structure,
+    declared_second_order as declared_second_order,
+    declared_width as declared_width,
+    detect_width as detect_width,
+    factor as factor,
+    jacobian as jacobian,
+    model_jacobian as model_jacobian,
+    second_order_factor as second_order_factor,
+    small_inv as small_inv,
+)

@@ -1,0 +1,23 @@
+"""The string pendulum: a viscoelastic string with an end mass (Poth et al.), in
+displacement variables and in natural variables (strain with tangent or angle).
+
+Models in `models`, effects (gravity, Kelvin-Voigt, the slack law) in `effects`,
+the paper's scene in `scenes`, figures in `plot` (imported on demand: matplotlib).
+"""
+
+from .effects import (
+    AbstractTensionLaw as AbstractTensionLaw,
+    Gravity as Gravity,
+    KelvinVoigt as KelvinVoigt,
+    Kinematics as Kinematics,
+    Loads as Loads,
+    Slack as Slack,
+)
+from .models import (
+    FORMULATIONS as FORMULATIONS,
+    AbstractString as AbstractString,
+    DisplacementString as DisplacementString,
+    NaturalAngleString as NaturalAngleString,
+    NaturalTangentString as NaturalTangentString,
+)
+from .scenes import string_pendulum as string_pendulum
