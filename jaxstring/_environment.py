@@ -21,7 +21,7 @@ def _f64(x):
 
 
 class AbstractFlow(eqx.Module):
-    """A fluid velocity field (current or wind): m/s at positions `(M, 3)`, time `t` (s).
+    """A fluid velocity field (current or wind): m/s at positions `(M, 3)` and time t.
 
     Positions are in the earth frame of the model that asks (for the tether and the
     tandem: x north, y east, z up; the tandem asks at the surface, z = 0).

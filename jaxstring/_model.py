@@ -1,6 +1,7 @@
 """The interface every jaxstring model implements (strings, tethers, vessels)."""
 
 import abc
+from typing import ClassVar
 
 import equinox as eqx
 from jaxtyping import Array
@@ -12,25 +13,30 @@ class AbstractModel(eqx.Module):
     Array fields are physical parameters (differentiable, vmappable); static fields
     are structure. Subclasses implement:
 
+    - `accepts`: the effect kinds (base classes) the model knows how to apply; a
+      `Scene` refuses any other effect with a ValueError naming both.
     - `state_shape()`: the shape of the state array `y`.
-    - `vector_field(t, y, effects)`: dy/dt under the scene's effects.
-    - `observables(t, y, effects)`: a dict of derived quantities of one state
+    - `vector_field(t, y, effects, env)`: dy/dt under the scene's effects in the
+      scene's `Environment`.
+    - `observables(t, y, effects, env)`: a dict of derived quantities of one state
       (e.g. `positions`, `tension`, `energy`), saved in the Trajectory.
     - `project(y)`: the nearest state on the model's constraint manifold (identity
       for unconstrained models); `simulate` applies it after every step when
       `projects` is True.
     """
 
+    accepts: ClassVar[tuple[type, ...]] = ()
+
     @abc.abstractmethod
     def state_shape(self) -> tuple[int, ...]:
         """Shape of the state array."""
 
     @abc.abstractmethod
-    def vector_field(self, t, y, effects) -> Array:
-        """dy/dt of state `y` at time `t` (s) under `effects`."""
+    def vector_field(self, t, y, effects, env) -> Array:
+        """dy/dt of state `y` at time `t` (s) under `effects` in environment `env`."""
 
     @abc.abstractmethod
-    def observables(self, t, y, effects) -> dict:
+    def observables(self, t, y, effects, env) -> dict:
         """Derived quantities of one state, as a dict of arrays."""
 
     @property
@@ -73,7 +79,7 @@ class AbstractModel(eqx.Module):
         del effects
         return False
 
-    def vf_jacobian(self, t, y, effects):
+    def vf_jacobian(self, t, y, effects, env):
         """The Jacobian of `vector_field` at `(t, y)` as a
         `jaxstring._linalg.BlockTridiagonal` (one node per block), if the model can
         build it more cheaply than the implicit solvers' coloured JVPs (3 b of them
@@ -82,5 +88,5 @@ class AbstractModel(eqx.Module):
         A model that returns a matrix must return the exact Jacobian under
         `effects` (tests/test_fast_solvers.py compares it with the JVP-built one)
         and None for any effect it does not know."""
-        del t, y, effects
+        del t, y, effects, env
         return None

@@ -1,25 +1,30 @@
-"""A scene: a model, the effects it calls for, its initial state and time span."""
+"""A scene: model, effects, environment, initial state and time span."""
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._effect import AbstractEffect
+from ._environment import Environment
 from ._model import AbstractModel
 from ._validate import check_finite, is_concrete
-from .pendulum.effects import AbstractEffect
 
 
 class Scene(eqx.Module):
-    """Everything needed to simulate: model + effects + initial state + time span.
+    """Everything needed to simulate: model + effects + environment + initial state
+    + time span.
 
     **Arguments:**
 
     - `model`: any `AbstractModel` (string, tether, vessels).
-    - `effects`: tuple of effect Modules. Only these are computed.
+    - `effects`: tuple of effect Modules. Only these are computed; each must be of a
+      kind the model accepts (`model.accepts`), else a ValueError names both.
     - `y0`: initial state in the model's layout.
     - `t1`: end time, s (> t0). `t0`: start time, s.
     - `name`: a label for plots and the command line.
+    - `env`: the `Environment` (gravity, water and air density, viscosity, current
+      and wind); default `Environment()`.
     """
 
     model: AbstractModel
@@ -28,6 +33,7 @@ class Scene(eqx.Module):
     t1: Float[Array, ""] = eqx.field(converter=jnp.asarray)
     t0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
     name: str = eqx.field(static=True, default="scene")
+    env: Environment = eqx.field(default_factory=Environment)
 
     def __check_init__(self):
         if not isinstance(self.effects, tuple) or not all(
@@ -40,6 +46,19 @@ class Scene(eqx.Module):
         check_finite("y0", self.y0)
         if not isinstance(self.model, AbstractModel):
             raise ValueError("`model` must be a jaxstring model (AbstractModel).")
+        if not isinstance(self.env, Environment):
+            raise ValueError(
+                f"`env` must be a jaxstring Environment; got {type(self.env).__name__}."
+            )
+        accepts = self.model.accepts
+        for e in self.effects:
+            if not isinstance(e, accepts):
+                known = ", ".join(k.__name__ for k in accepts)
+                raise ValueError(
+                    f"effect {type(e).__name__} ({type(e).__module__}) cannot act on "
+                    f"model {type(self.model).__name__}: it accepts effects of the "
+                    f"kinds {known}."
+                )
         expected = tuple(self.model.state_shape())
         if tuple(jnp.shape(self.y0)) != tuple(expected):
             raise ValueError(
@@ -54,11 +73,11 @@ class Scene(eqx.Module):
 
     def vector_field(self, t, y):
         """dy/dt of the state under the scene's effects."""
-        return self.model.vector_field(t, y, self.effects)
+        return self.model.vector_field(t, y, self.effects, self.env)
 
     def observables(self, y, t=0.0):
         """Derived quantities of one state (see the model's `observables`)."""
-        return self.model.observables(t, y, self.effects)
+        return self.model.observables(t, y, self.effects, self.env)
 
     def tension(self, y):
         return self.observables(y)["tension"]

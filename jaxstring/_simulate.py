@@ -1,7 +1,9 @@
-"""simulate(scene, ...) -> Trajectory."""
+"""simulate(scene, ...) -> Trajectory, and the one solve behind simulate, fit, sweep."""
+
+from typing import Any
 
 import diffrax as dfx
-import jax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -15,43 +17,140 @@ from ._trajectory import Trajectory
 from ._validate import check_choice, check_int, check_positive, is_concrete
 
 
-def observables(scene: Scene, ts, ys):
-    """Derived observables of saved states `ys` (leading axis: time)."""
-    return jax.vmap(lambda t, y: scene.model.observables(t, y, scene.effects))(ts, ys)
+ADJOINTS = ("recursive", "direct", "backsolve", "forward")
 
 
-@cpu_jit
-def _solve(
-    scene,
-    ts,
-    rtol,
-    atol,
-    dt0,
-    newton_rtol,
-    newton_atol,
-    solver,
-    adaptive,
-    max_steps,
-    progress,
-    project,
-    step_control="auto",
-):
-    term = dfx.ODETerm(scene_vector_field)
-    dfx_solver = build_solver(solver, newton_rtol, newton_atol, scene)
-    if project and scene.model.projects:
-        dfx_solver = ProjectedSolver(dfx_solver)
+def make_adjoint(adjoint, checkpoints=None):
+    """A diffrax adjoint from a name (`"recursive"`, `"direct"`, `"backsolve"`,
+    `"forward"`) or a `diffrax.AbstractAdjoint` instance (returned as is)."""
+    if isinstance(adjoint, dfx.AbstractAdjoint):
+        return adjoint
+    if adjoint is None:
+        adjoint = "recursive"
+    check_choice("adjoint", adjoint, ADJOINTS)
+    if adjoint == "recursive":
+        return dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
+    if adjoint == "direct":
+        return dfx.DirectAdjoint()
+    if adjoint == "backsolve":
+        return dfx.BacksolveAdjoint()
+    return dfx.ForwardMode()
+
+
+class SolveConfig(eqx.Module):
+    """Solver settings of a solve.
+
+    Same meaning as the arguments of `jaxstring.simulate`; `adjoint` is a diffrax
+    adjoint (see `make_adjoint`; None: diffrax's default, recursive checkpointing).
+    Tolerances and `dt0` given as arrays are traced (new values reuse the compiled
+    solve, as in `simulate`); as Python floats they are compiled in. Every other
+    field is structure.
+    """
+
+    solver: Any = eqx.field(static=True, default="kvaerno5")
+    rtol: Any = 1e-6
+    atol: Any = 1e-6
+    n_save: int = eqx.field(static=True, default=201)
+    dt0: Any = None
+    newton_rtol: Any = None
+    newton_atol: Any = None
+    max_steps: int = eqx.field(static=True, default=200_000)
+    project: bool = eqx.field(static=True, default=True)
+    adjoint: Any = eqx.field(static=True, default=None)
+    step_control: str = eqx.field(static=True, default="auto")
+    progress: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        check_solver(self.solver)
+        check_positive("rtol", self.rtol)
+        check_positive("atol", self.atol)
+        check_int("n_save", self.n_save, 2)
+        check_int("max_steps", self.max_steps, 1)
+        check_choice("step_control", self.step_control, STEP_CONTROLS)
+        if self.dt0 is not None:
+            check_positive("dt0", self.dt0, "s")
+        for name in ("newton_rtol", "newton_atol"):
+            if getattr(self, name) is not None:
+                check_positive(name, getattr(self, name))
+        if self.adjoint is not None and not isinstance(
+            self.adjoint, dfx.AbstractAdjoint
+        ):
+            raise ValueError(
+                "`adjoint` must be a diffrax adjoint (use make_adjoint(name)); "
+                f"got {self.adjoint!r}."
+            )
+
+
+class _ProjectedSolverAD(ProjectedSolver):
+    # diffrax's ForwardMode/DirectAdjoint read `solver.scan_kind` (the wrapped
+    # solver's, set below); ProjectedSolver does not forward it.
+    @property
+    def scan_kind(self):
+        return getattr(self.solver, "scan_kind", None)
+
+
+def _default_adjoint(adjoint) -> bool:
+    return adjoint is None or (
+        type(adjoint) is dfx.RecursiveCheckpointAdjoint and adjoint.checkpoints is None
+    )
+
+
+def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
+    """Integrate `scene`: the one solve behind `simulate`, `fit` and `sweep`.
+
+    Usable inside `jax.grad`, `jax.vmap` and `jit`: no check here looks at array
+    values (the scene may be traced); `config` was checked when it was built. `ts`
+    defaults to `config.n_save` points over the span. A failed solve does not raise:
+    the Trajectory's `result` says why, with the data up to the failure.
+    """
+    if ts is None:
+        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
+    adaptive = is_adaptive(config.solver)
+    dt0 = config.dt0
+    if not adaptive and dt0 is None:
+        dt0 = 0.005  # the paper's step
+    dt0 = None if dt0 is None else f64(dt0)
+    nr = config.rtol if config.newton_rtol is None else config.newton_rtol
+    na = config.atol if config.newton_atol is None else config.newton_atol
+    adjoint = make_adjoint(config.adjoint)
+    if isinstance(adjoint, dfx.BacksolveAdjoint) and scene.model.projects:
+        raise ValueError(
+            "`adjoint='backsolve'` does not fit a model that projects onto its "
+            f"constraint ({type(scene.model).__name__}); use 'recursive'."
+        )
+    solver = build_solver(config.solver, f64(nr), f64(na), scene)
+    if config.project and scene.model.projects:
+        if not _default_adjoint(config.adjoint):
+            # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
+            # differentiate in forward mode / with DirectAdjoint, but cannot see
+            # through the wrapper: do it before wrapping.
+            kind = {dfx.ForwardMode: "lax", dfx.DirectAdjoint: "bounded"}.get(
+                type(adjoint)
+            )
+            if kind is not None and isinstance(solver, dfx.AbstractRungeKutta):
+                if solver.scan_kind is None:
+                    solver = eqx.tree_at(
+                        lambda s: s.scan_kind, solver, kind, is_leaf=lambda x: x is None
+                    )
+            solver = _ProjectedSolverAD(solver)
+        else:
+            solver = ProjectedSolver(solver)
         saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))
     else:
         saveat = dfx.SaveAt(ts=ts)
-    controller = make_controller(solver, rtol, atol, adaptive, step_control)
+    controller = make_controller(
+        config.solver, f64(config.rtol), f64(config.atol), adaptive, config.step_control
+    )
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
-        if progress
-        else (dfx.NoProgressMeter())
+        if config.progress
+        else dfx.NoProgressMeter()
     )
     sol = dfx.diffeqsolve(
-        term,
-        dfx_solver,
+        dfx.ODETerm(scene_vector_field),
+        solver,
         t0=scene.t0,
         t1=scene.t1,
         dt0=dt0,
@@ -59,41 +158,15 @@ def _solve(
         args=scene,
         saveat=saveat,
         stepsize_controller=controller,
-        max_steps=max_steps,
+        max_steps=config.max_steps,
         throw=False,
         progress_meter=meter,
+        adjoint=adjoint,
     )
-    ys = sol.ys
-    # States after a failure are inf in diffrax's output: evaluate observables on
-    # finite states only, and mark how far the run got.
-    finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
-    n_valid = jnp.sum(jnp.cumprod(finite))
-    safe_ys = jnp.where(finite.reshape((-1,) + (1,) * (ys.ndim - 1)), ys, scene.y0)
-    obs = observables(scene, ts, safe_ys)
+    return Trajectory.from_solution(ts, sol.ys, sol.result, sol.stats, scene)
 
-    def mask(x):
-        m = finite.reshape((-1,) + (1,) * (x.ndim - 1))
-        return jnp.where(m, x, jnp.nan)
 
-    stats = {
-        key: sol.stats[key]
-        for key in (
-            "num_steps",
-            "num_accepted_steps",
-            "num_rejected_steps",
-            "max_steps",
-        )
-    }
-    t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
-    return Trajectory(
-        ts=ts,
-        ys=ys,
-        obs=jax.tree_util.tree_map(mask, obs),
-        result=sol.result,
-        stats=stats,
-        t_end=t_end,
-        n_valid=n_valid,
-    )
+_solve = cpu_jit(solve)
 
 
 def simulate(
@@ -112,6 +185,7 @@ def simulate(
     project: bool = True,
     accuracy: str | None = None,
     step_control: str = "auto",
+    adjoint=None,
 ) -> Trajectory:
     """Integrate a scene and return its Trajectory.
 
@@ -145,7 +219,10 @@ def simulate(
       for the Newton-stage solvers (Kvaerno, adaptive implicit Euler), which get
       `NewtonLimitedController`: a PID controller that, after a failed stage
       Newton iteration, halves the step and caps it just below the failed size
-      (see `jaxstring._controller`; 1.6-2.4x faster Kvaerno5 on stiff strings).
+      (1.6-2.4x faster Kvaerno5 on stiff strings).
+    - `adjoint`: how `jax.grad` differentiates through the solve: `"recursive"`
+      (default: diffrax's checkpointed reverse mode), `"direct"`, `"backsolve"`,
+      `"forward"` (forward mode: best for a few parameters), or a diffrax adjoint.
 
     Implicit solvers build the Newton matrix from an autodiff (forward-mode)
     Jacobian of the vector field. A failed solve does not raise: the returned
@@ -163,12 +240,8 @@ def simulate(
     check_positive("atol", atol)
     check_int("max_steps", max_steps, 1)
     check_choice("step_control", step_control, STEP_CONTROLS)
-    adaptive = is_adaptive(solver)
-    if not adaptive and dt0 is None:
-        dt0 = 0.005
     if dt0 is not None:
         check_positive("dt0", dt0, "s")
-        dt0 = jnp.asarray(dt0, dtype=jnp.float64)
     if ts is None:
         check_int("n_save", n_save, 2)
         ts = jnp.linspace(scene.t0, scene.t1, n_save)
@@ -180,23 +253,23 @@ def simulate(
         span_known = is_concrete(scene.t0) and is_concrete(scene.t1)
         if span_known and (tsn[0] < float(scene.t0) or tsn[-1] > float(scene.t1)):
             raise ValueError("`ts` must lie inside [scene.t0, scene.t1].")
-    nr = rtol if newton_rtol is None else newton_rtol
-    na = atol if newton_atol is None else newton_atol
-    check_positive("newton_rtol", nr)
-    check_positive("newton_atol", na)
-    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
-    return _solve(
-        scene,
-        ts,
-        f64(rtol),
-        f64(atol),
-        dt0,
-        f64(nr),
-        f64(na),
-        solver,
-        adaptive,
-        max_steps,
-        progress,
-        bool(project),
-        step_control,
+    if newton_rtol is not None:
+        check_positive("newton_rtol", newton_rtol)
+    if newton_atol is not None:
+        check_positive("newton_atol", newton_atol)
+    f64 = lambda x: None if x is None else jnp.asarray(x, dtype=jnp.float64)
+    config = SolveConfig(
+        solver=solver,
+        rtol=f64(rtol),
+        atol=f64(atol),
+        n_save=max(2, int(np.shape(ts)[0])),
+        dt0=f64(dt0),
+        newton_rtol=f64(newton_rtol),
+        newton_atol=f64(newton_atol),
+        max_steps=max_steps,
+        project=bool(project),
+        adjoint=None if adjoint is None else make_adjoint(adjoint),
+        step_control=step_control,
+        progress=bool(progress),
     )
+    return _solve(scene, config, ts)

@@ -79,10 +79,11 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from ._fit import SolveConfig, resolve, solve
+from ._fit import resolve
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._simulate import observables
+from ._simulate import SolveConfig, solve
+from ._solvers.diffrax_compat import code_message, result_code
 from ._solvers.fixed_step import ThetaMethod
 from ._solvers.projected import ProjectedSolver
 from ._solvers.registry import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
@@ -139,7 +140,7 @@ def _member(vals, scene, getters, fn, config, ts):
     )
     traj = solve(sc, config, ts)
     stats = {k: v for k, v in traj.stats.items() if k != "max_steps"}
-    return fn(traj, sc), traj.result._value, stats
+    return fn(traj, sc), result_code(traj.result), stats
 
 
 def _run_group(vals, scene, getters, fn, config, ts, batch_size):
@@ -350,33 +351,15 @@ def _lockstep(vals, scene, getters, fn, config, ts):
     }
 
     def post(v, ys):
-        # As in `jaxstring._simulate._solve`: observables on the finite rows only.
         sc = batch.member(v)
-        finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
-        n_valid = jnp.sum(jnp.cumprod(finite))
-        shape = (-1,) + (1,) * (ys.ndim - 1)
-        safe_ys = jnp.where(finite.reshape(shape), ys, sc.y0)
-        obs = observables(sc, ts, safe_ys)
-        mask = lambda x: jnp.where(
-            finite.reshape((-1,) + (1,) * (x.ndim - 1)), x, jnp.nan
-        )
-        t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], sc.t0)
-        traj = Trajectory(
-            ts=ts,
-            ys=ys,
-            obs=jtu.tree_map(mask, obs),
-            result=sol.result,
-            stats={k: sol.stats[k] for k in stats},
-            t_end=t_end,
-            n_valid=n_valid,
-        )
+        traj = Trajectory.from_solution(ts, ys, sol.result, sol.stats, sc)
         return fn(traj, sc)
 
     ys_all = sol.ys
     if flat:
         ys_all = ys_all.reshape((ys_all.shape[0], n) + jnp.shape(scene.y0))
     out = jax.vmap(post)(vals, jnp.swapaxes(ys_all, 0, 1))
-    codes = jnp.broadcast_to(sol.result._value, (n,))
+    codes = jnp.broadcast_to(result_code(sol.result), (n,))
     return out, codes, stats
 
 
@@ -596,10 +579,7 @@ def sweep(
     codes = take(codes)
     stats = {k: take(v) for k, v in stats.items()}
     ok = codes == 0
-    status = [
-        "success" if c == 0 else (dfx.RESULTS._index_to_message[int(c)] or "failure")
-        for c in codes.ravel()
-    ]
+    status = [code_message(c) for c in codes.ravel()]
     return SweepResult(
         values={g.label: a.reshape(shape) for g, a in zip(getters, arrays)},
         out=out,

@@ -2,8 +2,11 @@
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
+
+from ._solvers.diffrax_compat import result_message
 
 
 class Trajectory(eqx.Module):
@@ -49,12 +52,35 @@ class Trajectory(eqx.Module):
     @property
     def status(self) -> str:
         """'success' or the failure message of the solver."""
-        return "success" if self.ok else _message(self.result)
+        return "success" if self.ok else result_message(self.result)
 
     @property
     def end_mass(self) -> Float[Array, "T dim"]:
         """Position of the end mass (the last node), m."""
         return self.obs["positions"][:, -1, :]
+
+    @classmethod
+    def from_solution(cls, ts, ys, result, stats, scene) -> "Trajectory":
+        """The Trajectory of saved states `ys` at `ts` of `scene`, with the one
+        failure mask.
+
+        States after a failure are inf in diffrax's output: observables are evaluated
+        on finite states only (the initial state stands in for the others), and
+        every row after the first non-finite one is NaN; `n_valid` counts the rows
+        before it and `t_end` is the last save time reached."""
+        finite = jnp.all(jnp.isfinite(ys.reshape(ys.shape[0], -1)), axis=1)
+        n_valid = jnp.sum(jnp.cumprod(finite))
+        rows = lambda x: finite.reshape((-1,) + (1,) * (x.ndim - 1))
+        safe_ys = jnp.where(rows(ys), ys, scene.y0)
+        obs = jax.vmap(lambda t, y: scene.observables(y, t))(ts, safe_ys)
+        obs = jax.tree_util.tree_map(lambda x: jnp.where(rows(x), x, jnp.nan), obs)
+        stats = {
+            key: stats[key]
+            for key in ("num_steps", "num_accepted_steps", "num_rejected_steps")
+            + (("max_steps",) if "max_steps" in stats else ())
+        }
+        t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
+        return cls(ts, ys, obs, result, stats, t_end, n_valid)
 
     def summary(self) -> str:
         s = self.stats
@@ -63,8 +89,3 @@ class Trajectory(eqx.Module):
             f"steps: {int(s['num_accepted_steps'])} accepted, "
             f"{int(s['num_rejected_steps'])} rejected"
         )
-
-
-def _message(result) -> str:
-    index = int(jnp.asarray(result._value))
-    return dfx.RESULTS._index_to_message[index] or "success"

@@ -1,3 +1,3 @@
-"""Plots of the string pendulum (kept as `jaxstring.plot`; see `jaxstring.pendulum.plot`)."""
+"""Plots of the string pendulum (the name `jaxstring.pendulum.plot` had before)."""
 
 from .pendulum.plot import *  # noqa: F403

@@ -1,3 +1,3 @@
-"""Plots of the tandem (kept as `jaxstring.tanker_plot`; see `jaxstring.tandem.plot`)."""
+"""Plots of the tandem (the name `jaxstring.tandem.plot` had before)."""
 
 from .tandem.plot import *  # noqa: F403

@@ -1,3 +1,3 @@
-"""Plots of the tether (kept as `jaxstring.tether_plot`; see `jaxstring.tether.plot`)."""
+"""Plots of the tether (the name `jaxstring.tether.plot` had before)."""
 
 from .tether.plot import *  # noqa: F403

@@ -655,7 +655,7 @@ def model_jacobian(terms, t, y, args):
         and tuple(y.shape) == tuple(args.y0.shape)
     ):
         return None
-    return args.model.vf_jacobian(t, y, args.effects)
+    return args.model.vf_jacobian(t, y, args.effects, args.env)
 
 
 def jacobian(fn, y, width, linear_fn=None, second_order=0):

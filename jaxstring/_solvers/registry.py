@@ -3,10 +3,10 @@
 from typing import ClassVar
 
 import diffrax as dfx
-from diffrax._solver.runge_kutta import CalculateJacobian
 
 from .._validate import check_choice
 from .bdf import BDF
+from .diffrax_compat import EVERY_STAGE
 from .fixed_step import Newmark, ThetaMethod
 from .rosenbrock import Rodas5P
 from .stage_newton import StageNewton
@@ -72,19 +72,19 @@ _MAX_ITERS_ADAPTIVE = 10
 class Kvaerno3(dfx.Kvaerno3):
     """diffrax's Kvaerno3 with a Jacobian at every implicit stage's predictor."""
 
-    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+    calculate_jacobian: ClassVar = EVERY_STAGE
 
 
 class Kvaerno4(dfx.Kvaerno4):
     """diffrax's Kvaerno4 with a Jacobian at every implicit stage's predictor."""
 
-    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+    calculate_jacobian: ClassVar = EVERY_STAGE
 
 
 class Kvaerno5(dfx.Kvaerno5):
     """diffrax's Kvaerno5 with a Jacobian at every implicit stage's predictor."""
 
-    calculate_jacobian: ClassVar = CalculateJacobian.every_stage
+    calculate_jacobian: ClassVar = EVERY_STAGE
 
 
 KVAERNO = {"kvaerno3": Kvaerno3, "kvaerno4": Kvaerno4, "kvaerno5": Kvaerno5}

@@ -65,6 +65,7 @@ from jaxtyping import PyTree, Scalar
 
 from .. import _linalg
 from .._scene import Scene
+from .diffrax_compat import stage_arguments
 
 
 class _NoAux(eqx.Module):
@@ -87,36 +88,30 @@ class _StageState(eqx.Module):
 
 def _to_y_units(diff, y_new, args):
     """Return (increment of the state, the new state) for diffrax's argument layouts."""
-    if isinstance(args, tuple) and len(args) == 8:
-        # ESDIRK in f-space:
-        # (stage_index, diagonal, vf, prod, ti, yi_partial, args, control)
-        _, diagonal, _, prod, _, yi_partial, _, control = args
-        dy = jtu.tree_map(lambda d: diagonal * d, prod(diff, control))
+    a = stage_arguments(args)
+    if a.kind == "esdirk_f":
+        dy = jtu.tree_map(lambda d: a.diagonal * d, a.prod(diff, a.control))
         yi = jtu.tree_map(
-            lambda a, f: a + diagonal * f, yi_partial, prod(y_new, control)
+            lambda p, f: p + a.diagonal * f, a.yi_partial, a.prod(y_new, a.control)
         )
         return dy, yi
-    if isinstance(args, tuple) and len(args) == 7:
-        # ESDIRK in k-space:
-        # (stage_index, diagonal, vf_prod, ti, yi_partial, args, control)
-        _, diagonal, _, _, yi_partial, _, _ = args
-        dy = jtu.tree_map(lambda d: diagonal * d, diff)
-        yi = jtu.tree_map(lambda a, k: a + diagonal * k, yi_partial, y_new)
+    if a.kind == "esdirk_k":
+        dy = jtu.tree_map(lambda d: a.diagonal * d, diff)
+        yi = jtu.tree_map(lambda p, k: p + a.diagonal * k, a.yi_partial, y_new)
         return dy, yi
-    if isinstance(args, tuple) and len(args) == 5:
-        # Implicit Euler in k-space: (vf_prod, t1, y0, args, control)
-        _, _, y0, _, _ = args
-        return diff, jtu.tree_map(lambda a, k: a + k, y0, y_new)
+    if a.kind == "implicit_euler_k":
+        return diff, jtu.tree_map(lambda p, k: p + k, a.y0, y_new)
     # Unknown layout: measure in the unknown's own units.
     return diff, y_new
 
 
 def _explicit_stage(args) -> bool:
-    """Whether `args` are diffrax's ESDIRK f-space stage arguments with a diagonal
-    that is the constant 0 (an explicit stage)."""
-    if not (isinstance(args, tuple) and len(args) in (7, 8)):
+    """Whether `args` are diffrax's ESDIRK stage arguments with a diagonal that is
+    the constant 0 (an explicit stage)."""
+    a = stage_arguments(args)
+    if a.kind not in ("esdirk_f", "esdirk_k"):
         return False
-    diagonal = args[1]
+    diagonal = a.diagonal
     if isinstance(diagonal, jax.core.Tracer) or not hasattr(diagonal, "shape"):
         return False
     return diagonal.shape == () and bool(diagonal == 0)
@@ -126,7 +121,7 @@ def _stage_model_jacobian(u, args):
     """The Jacobian of diffrax's implicit Runge-Kutta stage relation at `u` from the
     model's own Jacobian (`AbstractModel.vf_jacobian`), else None.
 
-    diffrax's f-space relation (8 arguments, its ESDIRKs: Kvaerno) is
+    diffrax's f-space relation (its ESDIRKs: Kvaerno) is
     `g(f) = f - vf(t_i, y_i + a prod(f, dt), args)`; for an ODE term, prod(f, dt) =
     f dt, so its Jacobian is `I - a dt J(t_i, y_i + a f dt)`. diffrax passes `vf`
     and `prod` closure-converted, so which term they belong to cannot be seen:
@@ -136,16 +131,19 @@ def _stage_model_jacobian(u, args):
     iteration fails loudly, as `SecondOrderFactor` does for a wrong structure.
     Any other relation, or a model without its own Jacobian, gives None: the
     Jacobian is probed with JVPs as before."""
-    if not (isinstance(args, tuple) and len(args) == 8):
+    a = stage_arguments(args)
+    if a.kind != "esdirk_f":
         return None
-    _, diagonal, vf, prod, ti, yi, inner, control = args
+    diagonal, vf, prod, ti, yi, inner, control = (
+        a.diagonal, a.vf, a.prod, a.ti, a.yi_partial, a.args, a.control
+    )  # fmt: skip
     if not isinstance(inner, Scene):
         return None
     if not (jnp.shape(control) == () and jnp.shape(yi) == jnp.shape(u)):
         return None
     step = prod(u, control)
     y_at = yi + diagonal * step
-    jac = inner.model.vf_jacobian(ti, y_at, inner.effects)
+    jac = inner.model.vf_jacobian(ti, y_at, inner.effects, inner.env)
     if jac is None:
         return None
     same = jnp.array_equal(vf(ti, y_at, inner), inner.vector_field(ti, y_at))

@@ -1,18 +1,20 @@
-"""Physical effects a scene may call for.
-
-An effect that a scene does not name is not part of the scene: it is never traced
-and adds no operation to the compiled vector field. Switching an effect "off" is
-always structural (leave it out of ``Scene.effects``), never a traced flag.
+"""Effects on the string pendulum: gravity, and the constitutive laws of the string.
 
 Two kinds of effect act on a string:
 
-* **loads** (``AbstractLoad``): external forces on material points -- a line load
-  density at the nodes (N/m of unstrained length) and a point force on the end mass;
-  each model turns these into accelerations of its own variables. Conservative loads
-  also give their potential energy so that energy balances can be checked.
+* **loads** (``AbstractStringLoad``, the one protocol of ``jaxstring.AbstractLoad``):
+  ``forces(t, kin, env)`` gives external forces on the material points -- a line
+  load density at the nodes (N/m of unstrained length) and a point force on the end
+  mass (``Loads``); each model turns these into accelerations of its own variables.
+  A load whose force does not depend on the state (``constant = True``) has the
+  potential energy minus its work, which each model computes in its own
+  coordinates, so that energy balances hold for each discretisation.
 * **tension laws** (``AbstractTensionLaw``): the constitutive law of the string,
   applied on top of the linear elastic part N = EA eps that every string model has.
   They are applied in a fixed order (dissipation first, then the slack clip).
+
+Gravity acts along -y: the paper's pendulum swings in the x-y plane (in 3D, z is
+the out-of-plane direction); its magnitude is the scene's ``Environment.g``.
 """
 
 import abc
@@ -22,22 +24,27 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._effect import AbstractEffect, AbstractLoad
 from .._geometry import down
 from .._validate import check_nonnegative
 
 
 class Kinematics(eqx.Module):
-    """Positions and velocities of the material points of a string.
+    """Positions and velocities of the material points of a string, and their masses.
 
     **Arguments:**
 
     - `positions`: node positions including the pivot, shape `(k + 1, dim)`, m.
     - `velocities`: node velocities, shape `(k + 1, dim)`, m/s. The last node is the
       end mass.
+    - `line_mass`: mass per unstrained length mu, kg/m.
+    - `end_mass`: the end mass m_s, kg.
     """
 
     positions: Float[Array, "n dim"]
     velocities: Float[Array, "n dim"]
+    line_mass: Float[Array, ""]
+    end_mass: Float[Array, ""]
 
 
 class Loads(eqx.Module):
@@ -54,21 +61,17 @@ class Loads(eqx.Module):
         return Loads(self.line + other.line, self.end + other.end)
 
 
-class AbstractEffect(eqx.Module):
-    """Base of all effects."""
+class AbstractStringLoad(AbstractLoad):
+    """A load on the string: `forces(t, kin, env) -> Loads`.
 
+    `constant`: True when the force depends on neither the state nor time (its
+    potential is then minus its work)."""
 
-class AbstractLoad(AbstractEffect):
-    """An effect that applies external forces to the material points."""
-
-    @abc.abstractmethod
-    def loads(self, t, kin: Kinematics, model) -> Loads:
-        """Return the loads at time `t` (s) for kinematics `kin` of `model`."""
+    constant: ClassVar[bool] = False
 
     @abc.abstractmethod
-    def potential(self, y, kin: Kinematics, model) -> Float[Array, ""]:
-        """Return the potential energy of the load (J) in state `y` (with kinematics
-        `kin`); 0 for a non-conservative load."""
+    def forces(self, t, kin: Kinematics, env) -> Loads:
+        """Return the loads at time `t` (s) on the string with kinematics `kin`."""
 
 
 class AbstractTensionLaw(AbstractEffect):
@@ -85,30 +88,17 @@ class AbstractTensionLaw(AbstractEffect):
         """Return the strain that stores elastic energy EA/2 eps^2 under this law."""
 
 
-class Gravity(AbstractLoad):
-    """Uniform gravity along -y: weight of the string (mu g) and of the end mass.
+class Gravity(AbstractStringLoad):
+    """Uniform gravity along -y: weight of the string (mu g) and of the end mass,
+    with g the scene's `Environment.g`."""
 
-    **Arguments:**
+    constant: ClassVar[bool] = True
 
-    - `g`: gravitational acceleration, m/s^2 (>= 0).
-    """
-
-    g: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=9.81)
-
-    def __check_init__(self):
-        check_nonnegative("g", self.g, "m/s^2")
-
-    def loads(self, t, kin, model):
+    def forces(self, t, kin, env):
         del t
-        gvec = self.g * down(kin.positions.shape[-1])
-        line = jnp.broadcast_to(model.mu * gvec, kin.positions.shape)
-        return Loads(line=line, end=model.m_s * gvec)
-
-    def potential(self, y, kin, model):
-        # Gravity is a constant load: its potential is minus its work in the
-        # model's own generalised coordinates (so that energy balances hold exactly
-        # for each discretisation).
-        return model.constant_load_potential(y, self.loads(0.0, kin, model))
+        gvec = env.g * down(kin.positions.shape[-1])
+        line = jnp.broadcast_to(kin.line_mass * gvec, kin.positions.shape)
+        return Loads(line=line, end=kin.end_mass * gvec)
 
 
 class KelvinVoigt(AbstractTensionLaw):
@@ -160,7 +150,7 @@ EFFECTS = {
 
 def split_effects(effects):
     """Split effects into (loads, tension laws sorted by their order)."""
-    loads = tuple(e for e in effects if isinstance(e, AbstractLoad))
+    loads = tuple(e for e in effects if isinstance(e, AbstractStringLoad))
     laws = tuple(
         sorted(
             (e for e in effects if isinstance(e, AbstractTensionLaw)),
@@ -170,13 +160,13 @@ def split_effects(effects):
     return loads, laws
 
 
-def total_loads(loads, t, kin, model) -> Loads:
+def total_loads(loads, t, kin, env) -> Loads:
     """Sum the loads of all load effects (zero when there are none)."""
     total = Loads(
         line=jnp.zeros_like(kin.positions), end=jnp.zeros_like(kin.positions[-1])
     )
     for effect in loads:
-        total = total + effect.loads(t, kin, model)
+        total = total + effect.forces(t, kin, env)
     return total
 
 

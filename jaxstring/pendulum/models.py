@@ -27,6 +27,8 @@ from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
 from .._model import AbstractModel
 from .._validate import check_int, check_positive
 from .effects import (
+    AbstractStringLoad,
+    AbstractTensionLaw,
     Gravity,
     KelvinVoigt,
     Kinematics,
@@ -56,6 +58,7 @@ class AbstractString(AbstractModel):
     k: eqx.AbstractVar[int]
     dim: eqx.AbstractVar[int]
     formulation: ClassVar[str]
+    accepts: ClassVar[tuple[type, ...]] = (AbstractStringLoad, AbstractTensionLaw)
 
     def state_shape(self):
         return jnp.shape(self.initial_state(0.0))
@@ -69,7 +72,7 @@ class AbstractString(AbstractModel):
             return 1
         return None
 
-    def observables(self, t, y, effects):
+    def observables(self, t, y, effects, env):
         """Node positions and velocities (pivot included), tension and strain at the
         tension points, total energy and constraint error."""
         del t
@@ -80,7 +83,7 @@ class AbstractString(AbstractModel):
             "velocities": kin.velocities,
             "tension": tension(self, y, effects),
             "strain": eps,
-            "energy": energy(self, y, effects),
+            "energy": energy(self, y, effects, env),
             "constraint_error": self.constraint_error(y),
         }
 
@@ -102,8 +105,8 @@ class AbstractString(AbstractModel):
         """Mass lumped at each node (pivot included, end mass included), kg."""
 
     @abc.abstractmethod
-    def vector_field(self, t, y, effects) -> Array:
-        """dy/dt of the state `y` at time `t` (s) under `effects`."""
+    def vector_field(self, t, y, effects, env) -> Array:
+        """dy/dt of the state `y` at time `t` (s) under `effects` in `env`."""
 
     @abc.abstractmethod
     def elastic_energy(self, y, effects) -> Array:
@@ -143,11 +146,19 @@ def tension(model: AbstractString, y, effects) -> Array:
     return apply_laws(laws, model.EA, eps, eps_dot)
 
 
-def energy(model: AbstractString, y, effects) -> Array:
-    """Total mechanical energy (kinetic + elastic + potentials of the loads), J."""
+def energy(model: AbstractString, y, effects, env) -> Array:
+    """Total mechanical energy (kinetic + elastic + potentials of the loads), J.
+
+    A constant load's potential is minus its work in the model's own coordinates
+    (`constant_load_potential`); other loads store none."""
     loads, _ = split_effects(effects)
-    kin = model.kinematics(y) if loads else None
-    potential = sum((e.potential(y, kin, model) for e in loads), jnp.zeros(()))
+    constant = [e for e in loads if e.constant]
+    potential = jnp.zeros(())
+    if constant:
+        kin = model.kinematics(y)
+        for e in constant:
+            f = e.forces(0.0, kin, env)
+            potential = potential + model.constant_load_potential(y, f)
     return model.kinetic_energy(y) + model.elastic_energy(y, effects) + potential
 
 
@@ -190,7 +201,7 @@ class DisplacementString(AbstractString):
         zero = jnp.zeros((1, self.dim), y.dtype)
         r = jnp.concatenate([zero, y[:, : self.dim]], axis=0)
         v = jnp.concatenate([zero, y[:, self.dim :]], axis=0)
-        return Kinematics(positions=r, velocities=v)
+        return Kinematics(r, v, self.mu, self.m_s)
 
     def _rows(self, kin):
         """D+ r and D+ r', one row per element."""
@@ -226,7 +237,7 @@ class DisplacementString(AbstractString):
         del effects
         return True
 
-    def vf_jacobian(self, t, y, effects):
+    def vf_jacobian(self, t, y, effects, env):
         """The exact Jacobian of `vector_field`, element by element
         (`AbstractModel.vf_jacobian`), under jaxstring's string effects (gravity is
         constant; the tension laws act on each element's own strain and strain
@@ -242,7 +253,7 @@ class DisplacementString(AbstractString):
         of node j are -c_j (M_j + M_(j+1)) on the diagonal, c_j M_(j+1) above and
         c_j M_j below (no element beyond the end node; element 0 hangs from the
         fixed pivot)."""
-        del t
+        del t, env
         if not all(type(e) in (Gravity, KelvinVoigt, Slack) for e in effects):
             return None
         _, laws = split_effects(effects)
@@ -288,7 +299,7 @@ class DisplacementString(AbstractString):
             jnp.ones((), y.dtype),
         )
 
-    def vector_field(self, t, y, effects):
+    def vector_field(self, t, y, effects, env):
         loads, laws = split_effects(effects)
         kin = self.kinematics(y)
         eps, eps_dot, tangent = self._elements(kin)
@@ -298,7 +309,7 @@ class DisplacementString(AbstractString):
         acc_int = (Nt[1:] - Nt[:-1]) * (self.k / (self.mu * self.l))
         acc_end = -Nt[-1] / self.m_s  # eq 4
         if loads:
-            f = total_loads(loads, t, kin, self)
+            f = total_loads(loads, t, kin, env)
             acc_int = acc_int + f.line[1:-1] / self.mu
             acc_end = acc_end + f.end / self.m_s
         acc = jnp.concatenate([acc_int, acc_end[None, :]], axis=0)
@@ -384,7 +395,7 @@ def _natural_load_potential(model, q, loads):
     return -jnp.sum(w[:, None] * _tail_forces(model, loads) * q)
 
 
-def _natural_x(model, t, kin, tangent, N, loads):
+def _natural_x(model, t, kin, tangent, N, loads, env):
     """Second time derivative x_i = [(1 + eps_i) t_i]'' from eqs 15-19.
 
     External loads generalise the gravity term of z: z_i = (N_i t_i - F_i)/mu with
@@ -393,7 +404,7 @@ def _natural_x(model, t, kin, tangent, N, loads):
     """
     z = N[:, None] * tangent
     if loads:
-        z = z - _tail_forces(model, total_loads(loads, t, kin, model))
+        z = z - _tail_forces(model, total_loads(loads, t, kin, env))
     z = z / model.mu
     a = model.k * model.m_s / (model.mu * model.l)
     return _apply_minv_neg(z, model.k, model.l, a)
@@ -436,7 +447,9 @@ class NaturalTangentString(AbstractString):
         h = self.l / self.k
         r_s = (1 + eps)[:, None] * t
         v_s = eps_dot[:, None] * t + (1 + eps)[:, None] * t_dot
-        return Kinematics(_cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h))
+        return Kinematics(
+            _cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h), self.mu, self.m_s
+        )
 
     def strain(self, y):
         eps, _, eps_dot, _ = self._split(y)
@@ -449,12 +462,12 @@ class NaturalTangentString(AbstractString):
     def tension_weights(self):
         return _trapezoid_weights(self.l, self.k)
 
-    def vector_field(self, t, y, effects):
+    def vector_field(self, t, y, effects, env):
         loads, laws = split_effects(effects)
         eps, tan, eps_dot, tan_dot = self._split(y)
         kin = self.kinematics(y) if loads else None
         N = apply_laws(laws, self.EA, eps, eps_dot)
-        x = _natural_x(self, t, kin, tan, N, loads)
+        x = _natural_x(self, t, kin, tan, N, loads, env)
         # Solve eq 22 for (t'', eps''), for any |t| (eq 23 assumes |t| = 1):
         # (1+eps) t'' + eps'' t = x - 2 eps' t' =: b1,   t . t'' = -|t'|^2 =: b2.
         b1 = x - 2 * eps_dot[:, None] * tan_dot
@@ -536,7 +549,9 @@ class NaturalAngleString(AbstractString):
         h = self.l / self.k
         r_s = (1 + eps)[:, None] * t
         v_s = eps_dot[:, None] * t + ((1 + eps) * phi_dot)[:, None] * n
-        return Kinematics(_cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h))
+        return Kinematics(
+            _cumtrapz_nodes(r_s, h), _cumtrapz_nodes(v_s, h), self.mu, self.m_s
+        )
 
     def strain(self, y):
         return y[:, 0], y[:, 2]
@@ -548,13 +563,13 @@ class NaturalAngleString(AbstractString):
     def tension_weights(self):
         return _trapezoid_weights(self.l, self.k)
 
-    def vector_field(self, t, y, effects):
+    def vector_field(self, t, y, effects, env):
         loads, laws = split_effects(effects)
         eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
         tan, nrm = self._tn(phi)
         kin = self.kinematics(y) if loads else None
         N = apply_laws(laws, self.EA, eps, eps_dot)
-        x = _natural_x(self, t, kin, tan, N, loads)
+        x = _natural_x(self, t, kin, tan, N, loads, env)
         eps_dd = jnp.sum(x * tan, -1) + (1 + eps) * phi_dot**2
         phi_dd = (jnp.sum(x * nrm, -1) - 2 * eps_dot * phi_dot) / (1 + eps)
         return jnp.stack([eps_dot, phi_dot, eps_dd, phi_dd], axis=1)

@@ -1,7 +1,8 @@
-"""The string pendulum of Poth et al. as a scene, with the paper's default parameters."""
+"""The string pendulum of Poth et al. as a scene, with the paper's parameters."""
 
 import math
 
+from .._environment import Environment
 from .._scene import Scene
 from .._validate import (
     check_angle,
@@ -42,7 +43,7 @@ def string_pendulum(
     - `k`: number of elements (>= 2).
     - `EA`: axial stiffness, N (> 0). `alpha`: Kelvin-Voigt constant, s (>= 0).
     - `l`: unstrained length, m. `mu`: mass per length, kg/m. `m_s`: end mass, kg.
-    - `g`: gravity along -y, m/s^2.
+    - `g`: gravity along -y, m/s^2 (the scene's `Environment.g`).
     - `theta0`: release angle from the downward vertical, rad; pi/2 is straight and
       horizontal to the right, at rest and unstrained (the paper's figures).
     - `t1`: end time, s. `dim`: 2 or 3.
@@ -69,7 +70,7 @@ def string_pendulum(
         if isinstance(e, str):
             check_choice("effect", e, tuple(EFFECTS))
             if e == "gravity":
-                built.append(Gravity(g=g))
+                built.append(Gravity())
             elif e == "kelvin_voigt":
                 built.append(KelvinVoigt(alpha=alpha))
             elif e == "slack":
@@ -87,4 +88,5 @@ def string_pendulum(
         y0=y0,
         t1=t1,
         name=f"string-pendulum/{formulation}",
+        env=Environment(g=g),
     )

@@ -1,0 +1,112 @@
+"""Every use of diffrax's private API, in one place, checked against tested versions.
+
+jaxstring's own stiff solvers plug into diffrax at three points that diffrax does not
+document as public:
+
+1. `CalculateJacobian` (diffrax._solver.runge_kutta): the Kvaerno methods take a
+   Jacobian at every implicit stage's predictor (`every_stage`), not one per step.
+2. The argument tuple diffrax hands the root finder of an implicit Runge-Kutta
+   stage (`stage_arguments`): the banded stage Newton measures its increments in
+   the units of the state and builds the stage Jacobian from the model's own.
+3. `RESULTS._index_to_message` and the `_value` of a result (`result_message`,
+   `code_message`, `result_code`): the integer code and text of a failure.
+
+diffrax versions outside `TESTED` are refused at import with a message that names
+the installed and the tested versions, rather than failing deep inside a solve.
+"""
+
+from typing import Any, NamedTuple
+
+import diffrax as dfx
+
+
+TESTED = ((0, 7, 2), (0, 8, 0))  # >= 0.7.2, < 0.8
+
+
+def _version(text: str) -> tuple[int, ...]:
+    parts = []
+    for piece in text.split(".")[:3]:
+        digits = "".join(ch for ch in piece if ch.isdigit())
+        parts.append(int(digits) if digits else 0)
+    return tuple(parts + [0] * (3 - len(parts)))
+
+
+def check_version(version: str) -> None:
+    """Raise ImportError unless diffrax `version` lies in the tested range."""
+    low, high = TESTED
+    if not (low <= _version(version) < high):
+        raise ImportError(
+            f"jaxstring is tested with diffrax >= {'.'.join(map(str, low))}, "
+            f"< {'.'.join(map(str, high))}; diffrax {version} is installed. "
+            "Install a tested version: pip install 'diffrax>=0.7.2,<0.8'."
+        )
+
+
+check_version(dfx.__version__)
+
+from diffrax._solver.runge_kutta import CalculateJacobian  # noqa: E402
+
+
+EVERY_STAGE = CalculateJacobian.every_stage
+
+
+def result_code(result):
+    """The integer code of a diffrax result (0: success); an array under a trace."""
+    return result._value
+
+
+def code_message(code: int) -> str:
+    """'success' or diffrax's message for an integer result code."""
+    message = dfx.RESULTS._index_to_message[int(code)]
+    return message or ("success" if code == 0 else "failure")
+
+
+def result_message(result) -> str:
+    """'success' or diffrax's message for a diffrax result."""
+    return code_message(int(result_code(result)))
+
+
+class StageArguments(NamedTuple):
+    """The parts of diffrax's root-finder arguments for an implicit stage.
+
+    `kind`: `"esdirk_f"` (an ESDIRK stage in f-space: Kvaerno), `"esdirk_k"` (in
+    k-space), `"implicit_euler_k"`, or None (a layout this module does not know).
+    The other fields are None where the layout has no such part.
+    """
+
+    kind: str | None
+    diagonal: Any = None
+    vf: Any = None
+    prod: Any = None
+    ti: Any = None
+    yi_partial: Any = None
+    args: Any = None
+    control: Any = None
+    y0: Any = None
+
+
+def stage_arguments(args) -> StageArguments:
+    """Name the parts of the `args` diffrax passes to an implicit stage's root finder
+    (diffrax 0.7: `_implicit_stage` tuples of 8 (f-space) and 7 (k-space) items for
+    ESDIRKs, 5 for implicit Euler)."""
+    if not isinstance(args, tuple):
+        return StageArguments(None)
+    if len(args) == 8:
+        # (stage_index, diagonal, vf, prod, ti, yi_partial, args, control)
+        _, diagonal, vf, prod, ti, yi_partial, inner, control = args
+        return StageArguments(
+            "esdirk_f", diagonal, vf, prod, ti, yi_partial, inner, control
+        )
+    if len(args) == 7:
+        # (stage_index, diagonal, vf_prod, ti, yi_partial, args, control)
+        _, diagonal, vf_prod, ti, yi_partial, inner, control = args
+        return StageArguments(
+            "esdirk_k", diagonal, vf_prod, None, ti, yi_partial, inner, control
+        )
+    if len(args) == 5:
+        # (vf_prod, t1, y0, args, control)
+        vf_prod, t1, y0, inner, control = args
+        return StageArguments(
+            "implicit_euler_k", None, vf_prod, None, t1, None, inner, control, y0
+        )
+    return StageArguments(None)
