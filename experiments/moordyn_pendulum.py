@@ -34,6 +34,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -93,22 +95,20 @@ RK4 tScheme The time integration Scheme (-)
 """
 
 
-class EndWeight(jaxstring.AbstractLoad):
+class EndWeight(jaxstring.AbstractStringLoad):
     """The weight of the end mass only: the line is neutrally buoyant in water.
 
     **Arguments:** `weight`: the end mass's weight, N (acting along -y).
     """
 
     weight: jnp.ndarray = eqx.field(converter=jnp.asarray)
+    constant: ClassVar[bool] = True
 
-    def loads(self, t, kin, model):
-        del t
+    def forces(self, t, kin, env):
+        del t, env
         dim = kin.positions.shape[-1]
         end = jnp.zeros((dim,)).at[1].set(-self.weight)
         return jaxstring.Loads(line=jnp.zeros_like(kin.positions), end=end)
-
-    def potential(self, y, kin, model):
-        return model.constant_load_potential(y, self.loads(0.0, kin, model))
 
 
 @contextlib.contextmanager

@@ -32,9 +32,9 @@ from _common import new_figure, savefig, write_table  # sets XLA_FLAGS
 
 import jaxstring
 from jaxstring import _linalg
-from jaxstring._solvers.bdf import BDF
-from jaxstring.pendulum.effects import AbstractLoad, Loads
 from jaxstring._simulate import scene_vector_field
+from jaxstring._solvers.bdf import BDF
+from jaxstring.pendulum.effects import AbstractStringLoad, Loads
 
 
 TIMES = (
@@ -111,16 +111,13 @@ def pieces(k, n):
     return row
 
 
-class ZeroLoad(AbstractLoad):
+class ZeroLoad(AbstractStringLoad):
     """A load the string does not know and that adds nothing: under it the model
     gives no Jacobian of its own (`vf_jacobian` is None), so the solvers probe
     the vector field with 12 coloured JVPs, as before session 10."""
 
-    def loads(self, t, kin, model):
+    def forces(self, t, kin, env):
         return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))
-
-    def potential(self, y, kin, model):
-        return jnp.zeros((), y.dtype)
 
 
 def simulate_per_step(k, t1):

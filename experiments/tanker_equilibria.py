@@ -31,9 +31,9 @@ import numpy as np
 
 import jaxstring  # noqa: F401
 from jaxstring import tanker_plot as tp
+from jaxstring.cli.tandem import S1_CELLS_FULL, S1_SPEC
 from jaxstring.tandem.analysis import counts, find_equilibria, find_equilibria_map
 from jaxstring.tandem.scenes import tandem_equilibria
-from jaxstring.cli.tandem import S1_CELLS_FULL, S1_SPEC
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))

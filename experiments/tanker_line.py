@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxstring as js
-from jaxstring.tandem.line import line_equilibrium, with_line
 from jaxstring.tandem.analysis import measure_limit_cycle
+from jaxstring.tandem.line import line_equilibrium, with_line
 from jaxstring.tandem.scenes import tandem_fishtail
 
 

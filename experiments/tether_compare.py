@@ -31,8 +31,9 @@ import numpy as np
 
 import jaxstring as js
 import jaxstring.tether.plot as tplot
-from jaxstring.tether.effects import Buoyancy, Drag, Weight
+from jaxstring._environment import Environment
 from jaxstring._scene import Scene
+from jaxstring.tether.effects import Buoyancy, Drag, Weight
 from jaxstring.tether.models import AceamTether, ExactTether, FixedEnd
 from jaxstring.tether.scenes import tether_fixed, tether_winch
 
@@ -134,7 +135,9 @@ def v_release(method, interior_deg, N=11, L=10.0):
         fast=FixedEnd(jnp.asarray(pts[-1])),
     )
     y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
-    scene = Scene(model=model, effects=(Weight(), Buoyancy(), Drag()), y0=y0, t1=1.0)
+    env = Environment(rho_water=1024.0)  # the paper's water (Table 1)
+    effects = (Weight(), Buoyancy(), Drag())
+    scene = Scene(model=model, effects=effects, y0=y0, t1=1.0, env=env)
     return js.simulate(
         scene, "dopri5", rtol=1e-8, atol=1e-8, ts=jnp.linspace(0.0, 1.0, 101)
     )

@@ -181,8 +181,8 @@ def line_properties(scene):
     so Ca = CaAx = `added_mass`."""
     model = scene.model
     drag = [e for e in scene.effects if isinstance(e, js.Drag)]
-    if len(drag) != 1 or drag[0].current is None:
-        raise ValueError("`scene` must have one Drag effect with a current.")
+    if len(drag) != 1 or scene.env.current is None:
+        raise ValueError("`scene` must have one Drag effect and a current.")
     drag = drag[0]
     if float(drag.c_l) != 0.0:
         raise ValueError("`scene`: MoorDyn has no lateral drag; c_l must be 0.")
@@ -190,11 +190,11 @@ def line_properties(scene):
         "L": float(model.L),
         "d": float(model.d),
         "w": float(model.mass_per_length),
-        "rho": float(model.rho_water),
+        "rho": float(scene.env.rho_water),
         "Ca": float(model.added_mass),
         "Cd": float(drag.c_n),
         "CdAx": float(drag.c_t),
-        "current": tuple(float(u) for u in np.asarray(drag.current.velocity)),
+        "current": tuple(float(u) for u in np.asarray(scene.env.current.velocity)),
         "g": PARAMS["g"],
     }
 
@@ -392,17 +392,14 @@ class CentralTangentDrag(js.AbstractTetherLoad):
 
     drag: js.Drag
 
-    def forces(self, t, kin, model):
+    def forces(self, t, kin, env):
         ahead = kin.tangents
         root_link = kin.positions[0] / jnp.linalg.norm(kin.positions[0])
         behind = jnp.concatenate([root_link[None], ahead[:-1]], axis=0)
         both = ahead + behind
         both = both / jnp.linalg.norm(both, axis=1, keepdims=True)
         kin = eqx.tree_at(lambda k: k.tangents, kin, both)
-        return self.drag.forces(t, kin, model)
-
-    def potential(self, kin, model):
-        return self.drag.potential(kin, model)
+        return self.drag.forces(t, kin, env)
 
 
 def jaxstring_scene(method, t1):
@@ -416,7 +413,12 @@ def jaxstring_scene(method, t1):
             for e in scene.effects
         )
         scene = js.Scene(
-            model=scene.model, effects=effects, y0=scene.y0, t1=t1, name=method
+            model=scene.model,
+            effects=effects,
+            y0=scene.y0,
+            t1=t1,
+            name=method,
+            env=scene.env,
         )
     return scene
 

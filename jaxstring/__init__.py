@@ -7,14 +7,24 @@ from . import (
     tandem as tandem,
     tether as tether,
 )
+from ._effect import AbstractEffect as AbstractEffect, AbstractLoad as AbstractLoad
+from ._environment import (
+    AbstractCurrent as AbstractCurrent,
+    AbstractFlow as AbstractFlow,
+    DepthProfileCurrent as DepthProfileCurrent,
+    Environment as Environment,
+    FunctionCurrent as FunctionCurrent,
+    UniformCurrent as UniformCurrent,
+)
 from ._fit import (
     FitResult as FitResult,
     fit as fit,
     gauss_newton as gauss_newton,
     value_and_grad as value_and_grad,
 )
+from ._model import AbstractModel as AbstractModel
 from ._scene import Scene as Scene
-from ._simulate import simulate as simulate
+from ._simulate import SolveConfig as SolveConfig, simulate as simulate, solve as solve
 from ._solvers.bdf import BDF as BDF
 from ._solvers.fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
 from ._solvers.presets import ACCURACY_PRESETS as ACCURACY_PRESETS
@@ -30,8 +40,7 @@ from ._solvers.step_size import NewtonLimitedController as NewtonLimitedControll
 from ._sweep import SweepResult as SweepResult, sweep as sweep
 from ._trajectory import Trajectory as Trajectory
 from .pendulum.effects import (
-    AbstractEffect as AbstractEffect,
-    AbstractLoad as AbstractLoad,
+    AbstractStringLoad as AbstractStringLoad,
     AbstractTensionLaw as AbstractTensionLaw,
     Gravity as Gravity,
     KelvinVoigt as KelvinVoigt,
@@ -83,14 +92,10 @@ from .tandem.vessels import (
     shuttle_hull as shuttle_hull,
 )
 from .tether.effects import (
-    AbstractCurrent as AbstractCurrent,
     AbstractTetherLoad as AbstractTetherLoad,
     Buoyancy as Buoyancy,
-    DepthProfileCurrent as DepthProfileCurrent,
     Drag as Drag,
-    FunctionCurrent as FunctionCurrent,
     TetherKinematics as TetherKinematics,
-    UniformCurrent as UniformCurrent,
     Weight as Weight,
 )
 from .tether.models import (

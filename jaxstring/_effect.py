@@ -12,17 +12,18 @@ points of a model:
 `kin` is the model's kinematics: positions and velocities of its material points and
 the material properties the effects read (masses, volumes, diameters, hull
 coefficients). The model turns the forces into accelerations of its own variables.
-Conservative effects also give their potential energy, so that energy balances can be
-tested.
+A load that depends on neither the state nor time declares `constant = True`: its
+potential energy is then minus its work, which the model computes in its own
+coordinates, so that energy balances can be tested for every discretisation.
 
 Each model declares the effect kinds it accepts (`AbstractModel.accepts`); a scene
 that names any other effect is refused with a ValueError naming both.
 """
 
 import abc
+from typing import ClassVar
 
 import equinox as eqx
-from jaxtyping import Array
 
 
 class AbstractEffect(eqx.Module):
@@ -32,14 +33,9 @@ class AbstractEffect(eqx.Module):
 class AbstractLoad(AbstractEffect):
     """An effect that applies external forces to a model's material points."""
 
+    constant: ClassVar[bool] = False
+
     @abc.abstractmethod
     def forces(self, t, kin, env):
         """Forces at time `t` (s) on the material points described by `kin`, in the
         environment `env`; the layout is the model's (see its kinematics class)."""
-
-    def potential(self, kin, env) -> Array:
-        """Potential energy of the load, J, per material point (0: non-conservative)."""
-        del env
-        import jax.numpy as jnp
-
-        return jnp.zeros(kin.positions.shape[:1], kin.positions.dtype)

@@ -1,6 +1,8 @@
 """Variable-order BDF (jaxstring._solvers.bdf): convergence order, accuracy against
 references, the stiff string pendulum, steps against scipy's BDF, grad and vmap."""
 
+from typing import ClassVar
+
 import diffrax as dfx
 import equinox as eqx
 import jax
@@ -222,18 +224,16 @@ def test_bad_arguments_raise():
 # ---------------------------------------------------------------------------
 
 
-class _EndWeight(js.AbstractLoad):
+class _EndWeight(js.AbstractStringLoad):
     """The end mass's weight only (a neutrally buoyant line)."""
 
     weight: jnp.ndarray = eqx.field(converter=jnp.asarray)
+    constant: ClassVar[bool] = True
 
-    def loads(self, t, kin, model):
-        del t
+    def forces(self, t, kin, env):
+        del t, env
         end = jnp.zeros((kin.positions.shape[-1],)).at[1].set(-self.weight)
         return js.Loads(line=jnp.zeros_like(kin.positions), end=end)
-
-    def potential(self, y, kin, model):
-        return model.constant_load_potential(y, self.loads(0.0, kin, model))
 
 
 def _moordyn_pendulum(k=10, t1=20.0):

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._solvers.step_size import NewtonLimitedController, make_controller
 from jaxstring._solvers.stage_newton import StageNewton
+from jaxstring._solvers.step_size import NewtonLimitedController, make_controller
 
 
 K, EA, T1 = 10, 1e8, 0.5

@@ -97,3 +97,53 @@ def test_same_structure_does_not_recompile_for_new_parameter_values():
         scene = js.scenes.string_pendulum(k=5, EA=EA, alpha=alpha, t1=0.05)
         assert js.simulate(scene, ts=jnp.linspace(0, 0.05, 3)).ok
     assert _simulate._solve.cache_size() - before <= 1
+
+
+def _system_scenes():
+    """One small scene of each system."""
+    pendulum = js.pendulum.string_pendulum(k=4, t1=0.1)
+    tether = js.tether.tether_fixed("exact", N=6, t1=0.1)
+    tandem = js.tandem.tandem_fishtail(t1=10.0)
+    return {"pendulum": pendulum, "tether": tether, "tandem": tandem}
+
+
+def _foreign_effects():
+    """One effect of each system (the system it belongs to, the effect)."""
+    return {
+        "pendulum": js.pendulum.Gravity(),
+        "tether": js.tether.Drag(),
+        "tandem": js.tandem.LinearDamping(),
+    }
+
+
+@pytest.mark.parametrize(
+    "system, other",
+    [
+        (s, o)
+        for s in ("pendulum", "tether", "tandem")
+        for o in ("pendulum", "tether", "tandem")
+        if s != o
+    ],
+)
+def test_effect_of_another_system_is_refused_naming_both(system, other):
+    # A scene that names an effect its model cannot apply must not run silently
+    # without it: the Scene refuses it, naming the effect and the model.
+    scene = _system_scenes()[system]
+    effect = _foreign_effects()[other]
+    model = type(scene.model).__name__
+    with pytest.raises(ValueError, match=rf"{type(effect).__name__}.*{model}"):
+        js.Scene(
+            model=scene.model,
+            effects=scene.effects + (effect,),
+            y0=scene.y0,
+            t1=scene.t1,
+            env=scene.env,
+        )
+    # ... while the scene's own effects are accepted as they are.
+    js.Scene(
+        model=scene.model,
+        effects=scene.effects,
+        y0=scene.y0,
+        t1=scene.t1,
+        env=scene.env,
+    )

@@ -12,10 +12,10 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit, _linalg
-from jaxstring.pendulum.effects import AbstractLoad, Loads
 from jaxstring._solvers.fixed_step import Newmark, ThetaMethod
-from jaxstring._solvers.stage_newton import StageNewton
 from jaxstring._solvers.rosenbrock import Rodas5P
+from jaxstring._solvers.stage_newton import StageNewton
+from jaxstring.pendulum.effects import AbstractStringLoad, Loads
 from jaxstring.pendulum.models import DisplacementString
 
 from .helpers import (
@@ -548,15 +548,12 @@ def test_model_jacobian_factor_equals_dense_solve(a, b):
     assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-8
 
 
-class ZeroLoad(AbstractLoad):
+class ZeroLoad(AbstractStringLoad):
     """A load jaxstring's string does not know (and that adds nothing): the model
     then gives no Jacobian of its own and the solvers probe with JVPs."""
 
-    def loads(self, t, kin, model):
+    def forces(self, t, kin, env):
         return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))
-
-    def potential(self, y, kin, model):
-        return jnp.zeros((), y.dtype)
 
 
 @pytest.mark.parametrize("solver", ("bdf", "rodas5p", "kvaerno5"))

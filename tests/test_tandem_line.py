@@ -18,8 +18,8 @@ from jaxstring.tandem.line import (
     with_line,
 )
 from jaxstring.tandem.scenes import tandem_fishtail, tandem_fpso_alone
-from jaxstring.tether.models import LmsTether
 from jaxstring.tandem.vessels import Hawser
+from jaxstring.tether.models import LmsTether
 
 
 # A line of negligible mass (0.01 kg/m; its added mass, 21 kg/m, is 1e-5 of the

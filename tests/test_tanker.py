@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring.tandem.autopilot import NonlinearCompensator, outputs
 from jaxstring.tandem.analysis import (
     classify,
     controlled_metrics,
@@ -26,6 +25,7 @@ from jaxstring.tandem.analysis import (
     pitchfork_sweep,
     stability,
 )
+from jaxstring.tandem.autopilot import NonlinearCompensator, outputs
 from jaxstring.tandem.scenes import (
     ENVIRONMENTS,
     tandem_controlled,

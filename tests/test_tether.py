@@ -15,6 +15,8 @@ import pytest
 import scipy.optimize
 
 import jaxstring as js
+from jaxstring._environment import Environment
+from jaxstring._scene import Scene
 from jaxstring.tether.effects import (
     Buoyancy,
     DepthProfileCurrent,
@@ -24,7 +26,6 @@ from jaxstring.tether.effects import (
     UniformCurrent,
     Weight,
 )
-from jaxstring._scene import Scene
 from jaxstring.tether.models import (
     AceamTether,
     CoupledEnd,
@@ -43,6 +44,7 @@ from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 G = 9.81
 RHO = 1024.0
+ENV = Environment(rho_water=RHO)  # the paper's water (Table 1)
 # Save every 0.05 s, offset from the schedule's knots (at a knot the end velocity of
 # a piecewise-linear path is one-sided).
 PAPER_TS = jnp.concatenate([jnp.arange(0.025, 70.0, 0.05), jnp.array([70.0])])
@@ -219,7 +221,7 @@ def _v_release(method, interior_deg, N=11, L=10.0):
     )
     y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
     effects = (Weight(), Buoyancy(), Drag())
-    scene = Scene(model=model, effects=effects, y0=y0, t1=1.0)
+    scene = Scene(model=model, effects=effects, y0=y0, t1=1.0, env=ENV)
     return js.simulate(
         scene, "dopri5", rtol=1e-8, atol=1e-8, ts=jnp.linspace(0.0, 1.0, 101)
     )
@@ -294,14 +296,12 @@ def test_hanging_cable_settles_to_static_shape_in_current(method):
     current, c_t, c_n = (-0.6, 0.0, 0.0), 0.1, 1.0
     cls = ExactTether if method == "exact" else AceamTether
     model = cls(L=L, d=d, mass_per_length=mpl, N=N)
-    effects = (
-        Weight(),
-        Buoyancy(),
-        Drag(c_t=c_t, c_n=c_n, current=UniformCurrent(current)),
-    )
+    effects = (Weight(), Buoyancy(), Drag(c_t=c_t, c_n=c_n))
+    env = Environment(rho_water=RHO, current=UniformCurrent(current))
     # Released straight down; the overdamped creep to the steady shape takes a
     # few minutes of simulated time (the time constant is about 30 s).
-    scene = Scene(model=model, effects=effects, y0=hanging_state(model), t1=240.0)
+    y0 = hanging_state(model)
+    scene = Scene(model=model, effects=effects, y0=y0, t1=240.0, env=env)
     traj = js.simulate(
         scene, "dopri5", rtol=1e-8, atol=1e-8, ts=jnp.array([160.0, 240.0])
     )
@@ -336,13 +336,17 @@ def test_energy_conserved_with_exact_tensions_without_drag():
         fast=FixedEnd(jnp.array([8.0, 0.0, 0.0])),
     )
     y0 = arc_state(model, bulge=(0.0, 1.0, 0.0))
-    scene = Scene(model=model, effects=(Weight(), Buoyancy()), y0=y0, t1=3.0)
+    scene = Scene(model=model, effects=(Weight(), Buoyancy()), y0=y0, t1=3.0, env=ENV)
     traj = js.simulate(
         scene, "dopri5", rtol=1e-10, atol=1e-10, ts=jnp.linspace(0.0, 3.0, 61)
     )
     assert traj.ok, traj.status
     E = np.asarray(traj.energy)
-    ke = 0.5 * float(model.inertia) * np.sum(np.asarray(traj.velocities) ** 2, (1, 2))
+    ke = (
+        0.5
+        * float(model.inertia(ENV))
+        * np.sum(np.asarray(traj.velocities) ** 2, (1, 2))
+    )
     assert ke.max() > 10.0  # it really swings
     assert np.max(np.abs(E - E[0])) < 1e-6 * ke.max()
     assert np.max(np.abs(np.asarray(traj.length_error))) < 1e-8
@@ -352,13 +356,17 @@ def test_energy_conserved_with_exact_tensions_without_drag():
 # Effects
 
 
-def _kin(N=4, seed=0):
+def _kin(model, seed=0):
+    N = model.N
     rng = np.random.default_rng(seed)
     pos = jnp.asarray(rng.normal(size=(N, 3)))
     vel = jnp.asarray(rng.normal(size=(N, 3)))
     tan = rng.normal(size=(N, 3))
     tan = jnp.asarray(tan / np.linalg.norm(tan, axis=1, keepdims=True))
-    return TetherKinematics(positions=pos, velocities=vel, tangents=tan)
+    return TetherKinematics(
+        pos, vel, tan, model.element_mass, model.element_volume,
+        model.element_length, model.d,
+    )  # fmt: skip
 
 
 def _model(**kw):
@@ -366,10 +374,10 @@ def _model(**kw):
 
 
 def test_drag_matches_hand_formula():
-    model = _model()
-    drag = Drag(c_t=0.3, c_n=1.2, c_l=0.4, current=UniformCurrent((0.2, -0.1, 0.3)))
-    kin = _kin()
-    F = np.asarray(drag.forces(0.0, kin, model))
+    drag = Drag(c_t=0.3, c_n=1.2, c_l=0.4)
+    env = Environment(rho_water=RHO, current=UniformCurrent((0.2, -0.1, 0.3)))
+    kin = _kin(_model())
+    F = np.asarray(drag.forces(0.0, kin, env))
     l_e, d = 2.5, 0.02
     for n in range(4):
         i = np.asarray(kin.tangents[n])
@@ -386,16 +394,17 @@ def test_drag_matches_hand_formula():
 
 
 def test_zero_relative_velocity_gives_exactly_zero_drag_and_finite_gradient():
-    model = _model()
     current = UniformCurrent((0.7, -0.2, 0.1))
-    drag = Drag(c_t=0.1, c_n=1.0, c_l=0.5, current=current)
-    kin = _kin()
-    still = TetherKinematics(kin.positions, current(0.0, kin.positions), kin.tangents)
-    np.testing.assert_array_equal(drag.forces(0.0, still, model), 0.0)
+    env = Environment(rho_water=RHO, current=current)
+    drag = Drag(c_t=0.1, c_n=1.0, c_l=0.5)
+    kin = _kin(_model())
+    with_velocity = lambda v: eqx.tree_at(lambda k: k.velocities, kin, v)
+    still = with_velocity(current(0.0, kin.positions))
+    np.testing.assert_array_equal(drag.forces(0.0, still, env), 0.0)
 
     def total(v):
-        k = TetherKinematics(kin.positions, v, kin.tangents)
-        return jnp.sum(drag.forces(0.0, k, model) ** 2 + drag.forces(0.0, k, model))
+        k = with_velocity(v)
+        return jnp.sum(drag.forces(0.0, k, env) ** 2 + drag.forces(0.0, k, env))
 
     grad = jax.grad(total)(still.velocities)
     assert np.all(np.isfinite(np.asarray(grad)))
@@ -424,9 +433,10 @@ def test_scene_without_drag_has_no_drag_operations():
     y0 = hanging_state(model, direction=(1.0, 0.0, -1.0))
     with_drag = Scene(
         model=model,
-        effects=(Weight(), Drag(current=UniformCurrent((-1.0, 0.0, 0.0)))),
+        effects=(Weight(), Drag()),
         y0=y0,
         t1=1.0,
+        env=Environment(current=UniformCurrent((-1.0, 0.0, 0.0))),
     )
     without = Scene(model=model, effects=(Weight(),), y0=y0, t1=1.0)
     jx = lambda s: jax.make_jaxpr(s.vector_field)(0.0, s.y0).jaxpr
@@ -441,16 +451,16 @@ def test_scene_without_drag_has_no_drag_operations():
 
 def test_weight_and_buoyancy_cancel_for_neutral_cable():
     scene = tether_fixed("aceam", N=5, L=60.0)
-    kin = _kin(5)
+    kin = _kin(scene.model)
     w, b = scene.effects[0], scene.effects[1]
     np.testing.assert_allclose(
-        w.forces(0.0, kin, scene.model) + b.forces(0.0, kin, scene.model),
+        w.forces(0.0, kin, scene.env) + b.forces(0.0, kin, scene.env),
         0.0,
         atol=1e-14,
     )
     m = scene.model
     np.testing.assert_allclose(
-        w.forces(0.0, kin, m)[0, 2], -float(m.element_mass) * G, rtol=1e-14
+        w.forces(0.0, kin, scene.env)[0, 2], -float(m.element_mass) * G, rtol=1e-14
     )
 
 
@@ -518,12 +528,13 @@ def test_coupled_end_returns_the_end_forces_of_the_prescribed_end():
     a = AceamTether(fast=path, **kw)
     b = AceamTether(fast=CoupledEnd(), **kw)
     y = arc_state(a) + 0.01
-    effects = (Weight(), Drag(current=UniformCurrent((-1.0, 0.0, 0.0))))
+    effects = (Weight(), Drag())
+    env = Environment(rho_water=RHO, current=UniformCurrent((-1.0, 0.0, 0.0)))
     t = 2.0
     kin = path.kinematics(t)
     rates = eqx.filter_jit(lambda m, *args, **kw: m.rates(*args, **kw))
-    dy_a, root_a, fast_a = rates(a, t, y, effects)
-    dy_b, root_b, fast_b = rates(b, t, y, effects, fast=kin)
+    dy_a, root_a, fast_a = rates(a, t, y, effects, env)
+    dy_b, root_b, fast_b = rates(b, t, y, effects, env, fast=kin)
     np.testing.assert_array_equal(dy_a, dy_b)
     np.testing.assert_array_equal(fast_a, fast_b)
     # The force on the vessel is the end link's proportional law, towards the cable.
@@ -532,7 +543,7 @@ def test_coupled_end_returns_the_end_forces_of_the_prescribed_end():
     T = float(a.k) * (l - float(a.link_length)) / float(a.link_length)
     np.testing.assert_allclose(fast_a, T * d / l, rtol=1e-12)
     with pytest.raises(ValueError, match="CoupledEnd"):
-        b.rates(t, y, effects)
+        b.rates(t, y, effects, env)
     with pytest.raises(ValueError, match="end_links"):
         ExactTether(fast=CoupledEnd(), **kw)
 

@@ -6,6 +6,7 @@ the paper's scene in `scenes`, figures in `plot` (imported on demand: matplotlib
 """
 
 from .effects import (
+    AbstractStringLoad as AbstractStringLoad,
     AbstractTensionLaw as AbstractTensionLaw,
     Gravity as Gravity,
     KelvinVoigt as KelvinVoigt,

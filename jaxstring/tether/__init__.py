@@ -8,6 +8,7 @@ figures in `plot` (imported on demand: matplotlib).
 """
 
 from .effects import (
+    AbstractTetherLoad as AbstractTetherLoad,
     Buoyancy as Buoyancy,
     Drag as Drag,
     TetherKinematics as TetherKinematics,

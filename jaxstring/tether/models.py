@@ -351,6 +351,7 @@ class _Chain(eqx.Module):
     tangents: Array  # element axes i_n (N, 3)
     F_ext: Array  # external loads on the elements (N, 3)
     kin: TetherKinematics
+    inertia: Array  # element inertia mu, kg
     root: EndKinematics
     fast: EndKinematics | None
     released: Array  # released length L_r, m
@@ -361,16 +362,15 @@ class AbstractTether(AbstractModel):
     """An inextensible tether of N point elements (see the module docstring).
 
     **Fields** (all final classes): `L` full length (m), `d` diameter (m),
-    `mass_per_length` (kg/m), `rho_water` (kg/m^3), `added_mass` coefficient C_a (-),
-    array leaves; `N` (number of elements), `root`, `fast` (end conditions) and
-    `released` (a `PiecewiseLinear` released length L_r(t), m, or `None` for a
-    fixed length) are structure.
+    `mass_per_length` (kg/m), `added_mass` coefficient C_a (-), array leaves (the
+    water density is the scene's `Environment.rho_water`); `N` (number of
+    elements), `root`, `fast` (end conditions) and `released` (a `PiecewiseLinear`
+    released length L_r(t), m, or `None` for a fixed length) are structure.
     """
 
     L: eqx.AbstractVar[Float[Array, ""]]
     d: eqx.AbstractVar[Float[Array, ""]]
     mass_per_length: eqx.AbstractVar[Float[Array, ""]]
-    rho_water: eqx.AbstractVar[Float[Array, ""]]
     added_mass: eqx.AbstractVar[Float[Array, ""]]
     N: eqx.AbstractVar[int]
     root: eqx.AbstractVar[AbstractEnd]
@@ -378,6 +378,7 @@ class AbstractTether(AbstractModel):
     released: eqx.AbstractVar[PiecewiseLinear | None]
     method: ClassVar[str]
     projects: ClassVar[bool] = False
+    accepts: ClassVar[tuple[type, ...]] = (AbstractTetherLoad,)
 
     # -- derived sizes (properties of the parameters, so they stay differentiable)
     @property
@@ -405,12 +406,10 @@ class AbstractTether(AbstractModel):
         """Mass of one element, kg."""
         return self.mass_per_length * self.element_length
 
-    @property
-    def inertia(self):
-        """mu = m_e + C_a rho Q_e: element mass plus added mass of water, kg."""
-        return (
-            self.element_mass + self.added_mass * self.rho_water * self.element_volume
-        )
+    def inertia(self, env):
+        """mu = m_e + C_a rho Q_e: element mass plus added mass of water (density
+        `env.rho_water`), kg."""
+        return self.element_mass + self.added_mass * env.rho_water * self.element_volume
 
     @abc.abstractmethod
     def _root_rigid(self) -> bool:
@@ -462,7 +461,7 @@ class AbstractTether(AbstractModel):
         r = q if self._root_rigid() else jnp.maximum(q - 1, 0)
         return g, gdot, gddot, r, L_r, -L_c_dot
 
-    def _chain(self, t, y, effects, root, fast) -> _Chain:
+    def _chain(self, t, y, effects, env, root, fast) -> _Chain:
         loads = _loads(effects)
         p, v = y[:, :3], y[:, 3:]
         root = self.root.kinematics(t) if root is None else root
@@ -493,10 +492,13 @@ class AbstractTether(AbstractModel):
             tangents = jnp.concatenate([u[1:-1], u[-2:-1]], axis=0)
         else:
             tangents = u[1:]
-        kin = TetherKinematics(positions=P, velocities=V, tangents=tangents)
+        kin = TetherKinematics(
+            P, V, tangents, self.element_mass, self.element_volume,
+            self.element_length, self.d,
+        )  # fmt: skip
         F_ext = jnp.zeros_like(P)
         for effect in loads:
-            F_ext = F_ext + effect.forces(t, kin, self)
+            F_ext = F_ext + effect.forces(t, kin, env)
         if active is not None:
             F_ext = jnp.where(active[:, None], F_ext, 0.0)
         return _Chain(
@@ -514,6 +516,7 @@ class AbstractTether(AbstractModel):
             tangents=tangents,
             F_ext=F_ext,
             kin=kin,
+            inertia=self.inertia(env),
             root=root,
             fast=fast,
             released=L_r,
@@ -536,22 +539,23 @@ class AbstractTether(AbstractModel):
         return root_force, fast_force
 
     # -- dynamics
-    def rates(self, t, y, effects, root=None, fast=None):
+    def rates(self, t, y, effects, env, root=None, fast=None):
         """dy/dt and the end forces; the coupling interface for vessel models.
 
         **Arguments:**
 
-        - `t`: time, s. `y`: state `(N, 6)`. `effects`: the scene's effects.
+        - `t`: time, s. `y`: state `(N, 6)`. `effects`, `env`: the scene's effects
+          and environment.
         - `root`, `fast`: `EndKinematics` of the mounts, overriding the model's end
           conditions (required for a `CoupledEnd`).
 
         **Returns:** `(dy/dt, root_force, fast_force)`: the forces (N, shape `(3,)`)
         that the tether exerts on the root and running-end mounts.
         """
-        ch = self._chain(t, y, effects, root, fast)
+        ch = self._chain(t, y, effects, env, root, fast)
         T = self._tensions(ch)
         Tu = T[:, None] * ch.u
-        acc = (Tu[1:] - Tu[:-1] + ch.F_ext) / self.inertia
+        acc = (Tu[1:] - Tu[:-1] + ch.F_ext) / ch.inertia
         if ch.active is None:
             dy = jnp.concatenate([ch.V, acc], axis=1)
         else:
@@ -573,17 +577,17 @@ class AbstractTether(AbstractModel):
         root_force, fast_force = self._end_forces(ch, T)
         return dy, root_force, fast_force
 
-    def vector_field(self, t, y, effects):
-        return self.rates(t, y, effects)[0]
+    def vector_field(self, t, y, effects, env):
+        return self.rates(t, y, effects, env)[0]
 
-    def observables(self, t, y, effects):
+    def observables(self, t, y, effects, env):
         """Positions (N, 3), velocities, mount-and-element points `nodes` (N + 2, 3),
         link `tension` (N + 1,), link `strain` (l - g)/L_link, `length_error`
         (L_r - sum of link lengths)/L_r, `released_length`, `root_force` and
         `fast_force` (on the mounts, (3,)), `energy` (kinetic + potentials of the
         conservative loads + elastic links) and `constraint_error`
         (max |l - g|/L_link)."""
-        ch = self._chain(t, y, effects, None, None)
+        ch = self._chain(t, y, effects, env, None, None)
         T = self._tensions(ch)
         root_force, fast_force = self._end_forces(ch, T)
         fast_point = ch.P[-1] if ch.fast is None else ch.fast.position
@@ -602,21 +606,24 @@ class AbstractTether(AbstractModel):
             "released_length": ch.released,
             "root_force": root_force,
             "fast_force": fast_force,
-            "energy": self._energy(ch, effects),
+            "energy": self._energy(ch, effects, env),
             "constraint_error": jnp.max(jnp.abs(strain)),
         }
 
-    def _energy(self, ch, effects):
+    def _energy(self, ch, effects, env):
+        # Elements on the winch drum are out of the computation: no energy.
         weights = jnp.ones(self.N) if ch.active is None else ch.active * 1.0
-        ke = 0.5 * self.inertia * jnp.sum(weights * _dot(ch.V, ch.V))
+        ke = 0.5 * ch.inertia * jnp.sum(weights * _dot(ch.V, ch.V))
         pot = jnp.zeros(())
         for effect in _loads(effects):
-            pot = pot + jnp.sum(weights * effect.potential(ch.kin, self))
+            if effect.constant:  # potential: minus the work of the constant force
+                work = _dot(effect.forces(0.0, ch.kin, env), ch.P)
+                pot = pot - jnp.sum(weights * work)
         return ke + pot + self._elastic_energy(ch)
 
-    def energy(self, y, effects, t=0.0):
+    def energy(self, y, effects, env, t=0.0):
         """Total mechanical energy of state `y`, J."""
-        return self._energy(self._chain(t, y, effects, None, None), effects)
+        return self._energy(self._chain(t, y, effects, env, None, None), effects, env)
 
 
 def _loads(effects):
@@ -634,7 +641,6 @@ def _check_tether(model: AbstractTether) -> None:
     check_positive("L", model.L, "m")
     check_positive("d", model.d, "m")
     check_positive("mass_per_length", model.mass_per_length, "kg/m")
-    check_positive("rho_water", model.rho_water, "kg/m^3")
     check_nonnegative("added_mass", model.added_mass)
     if not isinstance(model.root, AbstractEnd) or isinstance(model.root, FreeEnd):
         raise ValueError(
@@ -698,7 +704,6 @@ class AceamTether(AbstractTether):
     L: Float[Array, ""] = _param()
     d: Float[Array, ""] = _param()
     mass_per_length: Float[Array, ""] = _param()
-    rho_water: Float[Array, ""] = _param(default=1024.0)
     added_mass: Float[Array, ""] = _param(default=1.0)
     T: Float[Array, ""] = _param(default=0.1)
     T1: Float[Array, ""] = _param(default=0.025)
@@ -735,9 +740,9 @@ class AceamTether(AbstractTether):
         alpha = ((g - l) / self.T - ld) / self.T1
         if self.feedforward:
             alpha = alpha + ch.gddot[1:N] + ch.gdot[1:N] / self.T1
-        rhs = alpha - (f[1:] - f[:-1]) / self.inertia
+        rhs = alpha - (f[1:] - f[:-1]) / ch.inertia
         start = None if self.released is None else ch.r
-        T_reg = self.inertia * _aceam_solve(rhs, start)
+        T_reg = ch.inertia * _aceam_solve(rhs, start)
         T = jnp.concatenate([jnp.zeros(1), T_reg, jnp.zeros(1)])
         T = T + onehot * T_root
         return T.at[N].add(T_fast)
@@ -770,7 +775,6 @@ class ExactTether(AbstractTether):
     L: Float[Array, ""] = _param()
     d: Float[Array, ""] = _param()
     mass_per_length: Float[Array, ""] = _param()
-    rho_water: Float[Array, ""] = _param(default=1024.0)
     added_mass: Float[Array, ""] = _param(default=1.0)
     omega: Float[Array, ""] = _param(default=20.0)
     k: Float[Array, ""] = _param(default=1e4)
@@ -802,7 +806,7 @@ class ExactTether(AbstractTether):
 
     def _tensions(self, ch):
         N = self.N
-        w = 1.0 / self.inertia
+        w = 1.0 / ch.inertia
         if ch.active is None:
             w_el = jnp.full(N, w)
             acc_el = ch.F_ext * w
@@ -867,7 +871,6 @@ class LmsTether(AbstractTether):
     L: Float[Array, ""] = _param()
     d: Float[Array, ""] = _param()
     mass_per_length: Float[Array, ""] = _param()
-    rho_water: Float[Array, ""] = _param(default=1024.0)
     added_mass: Float[Array, ""] = _param(default=1.0)
     k: Float[Array, ""] = _param(default=4e5)
     c: Float[Array, ""] = _param(default=0.0)

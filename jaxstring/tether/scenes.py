@@ -41,9 +41,10 @@ Choices the paper leaves open (stated here so that they can be changed):
 import jax.numpy as jnp
 import numpy as np
 
+from .._environment import Environment, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_int, check_nonnegative, check_positive
-from .effects import Buoyancy, Drag, UniformCurrent, Weight
+from .effects import Buoyancy, Drag, Weight
 from .models import (
     TETHER_METHODS,
     FixedEnd,
@@ -92,7 +93,6 @@ def _tether_model(
         L=L,
         d=d,
         mass_per_length=mass_per_length,
-        rho_water=rho,
         added_mass=added_mass,
         N=N,
         root=root,
@@ -191,13 +191,16 @@ def tether_fixed(
     )
     c_t_drag = c_t / np.pi if tangential_area == "projected" else c_t
     effects = (
-        Weight(g=g),
-        Buoyancy(g=g),
+        Weight(),
+        Buoyancy(),
         # `Drag` takes D_t = pi d l_e; c_t on d l_e is c_t/pi on pi d l_e.
-        Drag(c_t=c_t_drag, c_n=c_n, c_l=c_l, current=UniformCurrent(current)),
+        Drag(c_t=c_t_drag, c_n=c_n, c_l=c_l),
     )
+    env = Environment(g=g, rho_water=rho, current=UniformCurrent(current))
     y0 = arc_state(model, bulge=(-1.0, 0.0, 0.0), t0=float(np.asarray(times)[0]))
-    return Scene(model=model, effects=effects, y0=y0, t1=t1, name=f"{name}/{method}")
+    return Scene(
+        model=model, effects=effects, y0=y0, t1=t1, name=f"{name}/{method}", env=env
+    )
 
 
 def tether_winch(
