@@ -1,5 +1,7 @@
 """jaxstring: differentiable simulation of strings, tethers and vessels in JAX."""
 
+import importlib.metadata
+
 from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
     pendulum as pendulum,
@@ -115,4 +117,7 @@ from .tether.models import (
 )
 
 
-__version__ = "0.1.0"
+try:
+    __version__ = importlib.metadata.version("jaxstring")
+except importlib.metadata.PackageNotFoundError:  # a source tree, not installed
+    __version__ = "0+unknown"

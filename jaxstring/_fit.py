@@ -80,7 +80,7 @@ def resolve(scene, param) -> _Getter:
 
     `param` is a callable (`lambda s: s.effects[1].alpha`), a field name (`"alpha"`,
     `"EA"`: must be unique in the scene), a name qualified by the type that holds it
-    (`"KelvinVoigt.alpha"`, `"Gravity.g"`) or a path (`"model.EA"`,
+    (`"KelvinVoigt.alpha"`, `"Environment.g"`) or a path (`"model.EA"`,
     `"effects[1].alpha"`). Raises `ValueError` when it names nothing or several leaves.
     """
     leaves = jtu.tree_flatten_with_path(scene)[0]

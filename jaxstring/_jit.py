@@ -14,15 +14,12 @@ So `simulate`, `fit` and `sweep` compile with the option
 ``xla_cpu_experimental_ynn_fusion_type = ""`` on CPU. It is a per-compilation
 option: the user's own JAX code keeps XLA's defaults.
 
-Until session 9, `simulate` kept XLA's defaults: with the option, the *first*
-execution of a BDF solve at k >= 640 ran 3-4 ms per step slower than later ones
-(k = 640, 2 s: 60 s then 8.7 s; with XLA's defaults 26 s then 19 s; never
-understood). Since BDF stopped carrying its Jacobian in the solver state and
-combines its difference rows without `dot` and `cumsum` (session 9), the gap is
-gone: k = 640, 2 s, first call (with compilation) 15.8 s, then 7.4 s and 7.2 s;
-with XLA's defaults 22.3 s, then 14.1 s; k = 1280, 1 s: 22.4 s, then 14.8 s
-(session 8: 94-107 s, then 13-17 s). Kvaerno5 and Rodas5P at k = 640 show no gap
-either.
+A BDF solve at k = 640 over 2 s takes 15.8 s on its first call (compilation
+included), then 7.4 s and 7.2 s; with XLA's defaults 22.3 s, then 14.1 s; k = 1280,
+1 s: 22.4 s, then 14.8 s. (While BDF carried its Jacobian in the solver state, the
+first execution under this option ran 3-4 ms per step slower than later ones; with
+the Jacobian out of the state and the difference rows combined without `dot` and
+`cumsum`, that gap is gone, for Kvaerno5 and Rodas5P too.)
 """
 
 import functools

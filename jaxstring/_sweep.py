@@ -60,7 +60,7 @@ Where the time goes (string pendulum, k = 20, `experiments/sweep_speed.py`,
 which the implicit-step arithmetic (vector field, 12 JVPs, banded Jacobian and
 factorisation ~17 us, solves) is a minor part; the rest is per-iteration overhead
 of the solver loops, which a group shares between its members. In a vmapped
-fixed-step group of 16 (profiled, session 5) the block cyclic reduction takes about
+fixed-step group of 16 (profiled) the block cyclic reduction takes about
 half of the op time and the solves a fifth: XLA:CPU runs the 4 x 4 block
 arithmetic at a few ns per flop whatever the layout (a members-last variant under
 `jax.custom_batching.custom_vmap` was no faster and was dropped).
@@ -243,7 +243,7 @@ class _FlatBatch(eqx.Module):
         return self.batch.project(y.reshape(self.shape)).reshape(y.shape)
 
 
-# Fixed-step solvers (damped full Newton, `jaxstring._fixed_step`) by name -> theta.
+# Fixed-step solvers (damped full Newton, `jaxstring._solvers.fixed_step`) by name -> theta.
 LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
 
 
@@ -454,12 +454,11 @@ def sweep(
       the per-member cost of the batched Jacobian and factorisation grows with
       the group, and a shared step sequence is set by its hardest member). The
       fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
-      Session 5 (compiled without YNNPACK fusions, quiet machine): fixed-step
-      vmap in groups of 16 1.8x on one device and 2.9-3.3x in wall time on two
-      (`devices="auto"` with two CPU devices), equal to the loop to 2e-15.
-      Session 6 (Newton started from the previous step's increment, in the loop
-      and the sweep alike): 1.7x on one device, 3.1x on two (2.9-3.5x in ten
-      runs); groups of 8 on two devices were about 5 % faster than 16.
+      Compiled without YNNPACK fusions, on a quiet machine, with Newton started
+      from the previous step's increment (in the loop and the sweep alike):
+      fixed-step vmap in groups of 16 1.7x on one device and 3.1x in wall time on
+      two (`devices="auto"` with two CPU devices; 2.9-3.5x in ten runs), equal to
+      the loop to 2e-15; groups of 8 on two devices were about 5 % faster than 16.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
       its own status and the others are intact (`SweepResult.mode` says so).

@@ -184,7 +184,7 @@ def test_steps_comparable_to_scipy_bdf():
 def _end_y(g, solver="bdf"):
     """End-mass height at 0.2 s as a function of gravity g (about -g t^2 / 2)."""
     base = js.scenes.string_pendulum("displacement", k=4, EA=1e4, t1=0.2)
-    scene = eqx.tree_at(lambda s: s.effects[0].g, base, g)
+    scene = eqx.tree_at(lambda s: s.env.g, base, g)
     ts = jnp.array([0.0, 0.2])
     traj = js.simulate(scene, solver, rtol=1e-10, atol=1e-10, ts=ts)
     return traj.end_mass[-1, 1]
@@ -288,7 +288,7 @@ def test_moordyn_pendulum_stability_guard():
 def _final_refresh_count(formulation, skip_after):
     """BDF on the k = 8 pendulum through diffrax, returning the end state and the
     solver's count of accepted steps in a row that needed a fresh Jacobian."""
-    from jaxstring import _bdf
+    from jaxstring._solvers import bdf as _bdf
     from jaxstring._simulate import scene_vector_field
 
     scene = js.scenes.string_pendulum(formulation, k=8, EA=1e6, t1=0.3)

@@ -513,7 +513,7 @@ def test_model_jacobian_equals_autodiff(dim, effects):
     y = scene.y0 + 0.05 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     eps, _ = scene.model.strain(y)
     assert np.any(eps < 0) and np.any(eps > 0)
-    jac = scene.model.vf_jacobian(0.0, y, scene.effects)
+    jac = scene.model.vf_jacobian(0.0, y, scene.effects, scene.env)
     assert isinstance(jac, _linalg.SecondOrderJacobian)
     assert jac.p.diag.shape == (9, dim, dim)
     J = _dense_jacobian(scene, y)
@@ -535,7 +535,7 @@ def test_model_jacobian_factor_equals_dense_solve(a, b):
     rng = np.random.default_rng(5)
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     fac = _linalg.factor(
-        scene.model.vf_jacobian(0.0, y, scene.effects).scale_shift(a, b)
+        scene.model.vf_jacobian(0.0, y, scene.effects, scene.env).scale_shift(a, b)
     )
     M = a * np.eye(y.size) + b * _dense_jacobian(scene, y)
     rhs = rng.standard_normal(y.shape)
@@ -565,8 +565,8 @@ def test_solvers_with_the_model_jacobian_equal_the_probed_one(solver, monkeypatc
     calls = []
     own = DisplacementString.vf_jacobian
 
-    def spy(self, t, y, effects):
-        jac = own(self, t, y, effects)
+    def spy(self, t, y, effects, env):
+        jac = own(self, t, y, effects, env)
         calls.append(jac is not None)
         return jac
 

@@ -31,8 +31,8 @@ within ``max_iters`` (Hairer's prediction), the Jacobian is recomputed at the
 current iterate, up to ``max_jacobians`` times per solve (default 10), before
 divergence is declared -- as production stiff codes refresh on convergence failure.
 (Refreshing on the prediction as well, and allowing 10 Jacobians instead of 3,
-halved Kvaerno5's steps at k = 40, EA = 1e6 and 1e9: session-4 numbers in
-``experiments/results/bench_solvers_refresh.md``.) This is what
+halved Kvaerno5's steps at k = 40, EA = 1e6 and 1e9; the comparison is
+summarised in the docs' numerics page.) This is what
 makes the displacement string at EA >= 1e5 cheap: its stiff force
 N = EA (|D r| - 1) t is strongly nonlinear in the state (the stiff axis turns with
 the string, and the transverse "geometric" stiffness N / h is proportional to a strain

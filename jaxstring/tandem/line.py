@@ -1,5 +1,5 @@
 """The tandem with a real hawser: a tether chain (mass, weight, buoyancy, drag)
-between the FPSO stern fairlead and the shuttle bow fairlead (tanker issue, item 2).
+between the FPSO stern fairlead and the shuttle bow fairlead.
 
 `TandemLine` couples a `Tandem` (12 vessel states) to any tether model of
 `_tether` (`LmsTether` by default: every link a spring of axial stiffness EA,
@@ -275,7 +275,7 @@ def line_effects(vessel_effects, c_n=1.0, c_t=0.1, g=9.81):
     vc = current_velocity(vessel_effects)
     current = UniformCurrent(jnp.concatenate([vc, jnp.zeros(1)]))
     # Drag's c_t acts on the wetted surface pi d l_e; c_t / pi puts it on the
-    # projected area d l_e, as the tether scenes do (see _tether_scenes).
+    # projected area d l_e, as the tether scenes do (see jaxstring.tether.scenes).
     return (
         Weight(g=g),
         Buoyancy(g=g),
