@@ -41,80 +41,12 @@ from ._solvers.stage_newton import StageNewton as StageNewton
 from ._solvers.step_size import NewtonLimitedController as NewtonLimitedController
 from ._sweep import SweepResult as SweepResult, sweep as sweep
 from ._trajectory import Trajectory as Trajectory
-from .pendulum.effects import (
-    AbstractStringLoad as AbstractStringLoad,
-    AbstractTensionLaw as AbstractTensionLaw,
-    Gravity as Gravity,
-    KelvinVoigt as KelvinVoigt,
-    Kinematics as Kinematics,
-    Loads as Loads,
-    Slack as Slack,
-)
-from .pendulum.models import (
-    AbstractString as AbstractString,
-    DisplacementString as DisplacementString,
-    NaturalAngleString as NaturalAngleString,
-    NaturalTangentString as NaturalTangentString,
-)
-from .tandem.analysis import (
-    controlled_metrics as controlled_metrics,
-    find_equilibria as find_equilibria,
-    find_equilibria_map as find_equilibria_map,
-    hopf_sweep as hopf_sweep,
-    measure_limit_cycle as measure_limit_cycle,
-    pitchfork_sweep as pitchfork_sweep,
-    solve_equilibrium as solve_equilibrium,
-    stability as stability,
-)
-from .tandem.autopilot import (
-    ComputedForcePD as ComputedForcePD,
-    NonlinearCompensator as NonlinearCompensator,
-)
-from .tandem.line import (
-    TandemLine as TandemLine,
-    hawser_line as hawser_line,
-    line_equilibrium as line_equilibrium,
-    static_line as static_line,
-    with_line as with_line,
-)
-from .tandem.vessels import (
-    AbstractActuator as AbstractActuator,
-    AbstractVesselLoad as AbstractVesselLoad,
-    ConstantThrust as ConstantThrust,
-    Hawser as Hawser,
-    Hull as Hull,
-    LinearDamping as LinearDamping,
-    MooredFPSO as MooredFPSO,
-    OCIMFWind as OCIMFWind,
-    ShortWingCurrent as ShortWingCurrent,
-    Tandem as Tandem,
-    TurretMooring as TurretMooring,
-    fpso_hull as fpso_hull,
-    make_hull as make_hull,
-    shuttle_hull as shuttle_hull,
-)
-from .tether.effects import (
-    AbstractTetherLoad as AbstractTetherLoad,
-    Buoyancy as Buoyancy,
-    Drag as Drag,
-    TetherKinematics as TetherKinematics,
-    Weight as Weight,
-)
-from .tether.models import (
-    AbstractEnd as AbstractEnd,
-    AbstractTether as AbstractTether,
-    AceamTether as AceamTether,
-    CoupledEnd as CoupledEnd,
-    EndKinematics as EndKinematics,
-    ExactTether as ExactTether,
-    FixedEnd as FixedEnd,
-    FreeEnd as FreeEnd,
-    LmsTether as LmsTether,
-    PiecewiseLinear as PiecewiseLinear,
-    PrescribedEnd as PrescribedEnd,
-    arc_state as arc_state,
-    hanging_state as hanging_state,
-)
+
+# Every system's public names, flat as well (each list lives once, in its
+# namespace's `__all__`): js.DisplacementString, js.Drag, js.Tandem, ...
+from .pendulum import *  # noqa: E402, F403
+from .tandem import *  # noqa: E402, F403
+from .tether import *  # noqa: E402, F403
 
 
 try:

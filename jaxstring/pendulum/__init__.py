@@ -22,3 +22,20 @@ from .models import (
     NaturalTangentString as NaturalTangentString,
 )
 from .scenes import string_pendulum as string_pendulum
+
+
+__all__ = [
+    "AbstractStringLoad",
+    "AbstractTensionLaw",
+    "Gravity",
+    "KelvinVoigt",
+    "Kinematics",
+    "Loads",
+    "Slack",
+    "FORMULATIONS",
+    "AbstractString",
+    "DisplacementString",
+    "NaturalAngleString",
+    "NaturalTangentString",
+    "string_pendulum",
+]

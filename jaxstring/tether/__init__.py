@@ -30,3 +30,27 @@ from .models import (
     hanging_state as hanging_state,
 )
 from .scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
+
+
+__all__ = [
+    "AbstractTetherLoad",
+    "Buoyancy",
+    "Drag",
+    "TetherKinematics",
+    "Weight",
+    "AbstractEnd",
+    "AbstractTether",
+    "AceamTether",
+    "CoupledEnd",
+    "EndKinematics",
+    "ExactTether",
+    "FixedEnd",
+    "FreeEnd",
+    "LmsTether",
+    "PiecewiseLinear",
+    "PrescribedEnd",
+    "arc_state",
+    "hanging_state",
+    "tether_fixed",
+    "tether_winch",
+]
