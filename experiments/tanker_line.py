@@ -45,7 +45,7 @@ LIGHT = dict(mass_per_length=0.01, gravity=False, c_n=0.0, c_t=0.0)
 
 
 def _field(y, scene):
-    return scene.model.vector_field(0.0, y, scene.effects)
+    return scene.vector_field(0.0, y)
 
 
 def _leading(scene, y):
@@ -74,8 +74,8 @@ def stability_rows(quick):
     cases.append(("nylon line, no drag", 8, dict(c_n=0.0, c_t=0.0)))
     for label, N, kw in cases:
         sc = with_line(base, N=N, **kw)
-        y, res = line_equilibrium(sc.model, sc.y0, sc.effects)
-        obs = sc.model.observables(0.0, y, sc.effects)
+        y, res = line_equilibrium(sc)
+        obs = sc.observables(y)
         lam, fast = _leading(sc, y)
         rows.append((label, N, lam, fast, float(obs["span"]), float(obs["sag"])))
         print(

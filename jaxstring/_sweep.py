@@ -243,7 +243,7 @@ class _FlatBatch(eqx.Module):
         return self.batch.project(y.reshape(self.shape)).reshape(y.shape)
 
 
-# Fixed-step solvers (damped full Newton, `jaxstring._solvers.fixed_step`) by name -> theta.
+# Fixed-step solvers (damped full Newton, `_solvers.fixed_step`) by name -> theta.
 LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
 
 

@@ -14,7 +14,9 @@ def test_simulate_fit_and_sweep_give_the_same_trajectory():
     end = np.asarray(js.simulate(scene, **kw).end_mass)
     assert np.ptp(end[:, 1]) > 0.05  # it really moves
 
-    swept = js.sweep(scene, {"alpha": jnp.array([0.02])}, lambda tr, s: tr.end_mass, **kw)
+    swept = js.sweep(
+        scene, {"alpha": jnp.array([0.02])}, lambda tr, s: tr.end_mass, **kw
+    )
     assert bool(swept.ok.all())
     np.testing.assert_allclose(np.asarray(swept.out)[0], end, rtol=0, atol=1e-12)
 

@@ -34,7 +34,7 @@ def aligned(hawser, **kw):
 
 
 def _field(y, scene):
-    return scene.model.vector_field(0.0, y, scene.effects)
+    return scene.vector_field(0.0, y)
 
 
 def leading_eigenvalue(scene, y):
@@ -49,9 +49,9 @@ def test_light_line_is_the_massless_hawser():
     k_h l0); the fishtail eigenvalue pair (spec S2) is the massless one."""
     ref = aligned("massless")
     sc = with_line(ref, **LIGHT)
-    y, res = line_equilibrium(sc.model, sc.y0, sc.effects)
+    y, res = line_equilibrium(sc)
     assert res < 1e-6
-    obs = sc.model.observables(0.0, y, sc.effects)
+    obs = sc.observables(y)
     T_ref = float(ref.observables(ref.y0)["tension"])
     hawser = [e for e in ref.effects if isinstance(e, Hawser)][0]
     np.testing.assert_allclose(float(obs["tension"]), T_ref, rtol=1e-8)
@@ -75,15 +75,16 @@ def test_static_line_is_the_point_load_string():
     sc = with_line(ref, c_n=0.0, c_t=0.0)
     m, line = sc.model, sc.model.line
     yv = sc.y0[:12]
-    yl = static_line(m, yv, sc.effects)  # as with_line's start, from no sag guess
+    yl = static_line(m, yv, sc.effects, sc.env)  # as with_line's start, no sag guess
     np.testing.assert_allclose(yl, sc.y0[12:].reshape(-1, 6), atol=1e-9)
-    obs = m.observables(0.0, sc.y0, sc.effects)
+    obs = sc.observables(sc.y0)
     nodes = np.asarray(obs["nodes"])
     chord = nodes[-1, :2] - nodes[0, :2]
     S = float(np.linalg.norm(chord))
     x = (nodes[1:-1, :2] - nodes[0, :2]) @ (chord / S)
     z = nodes[1:-1, 2]
-    W = float((line.element_mass - line.rho_water * line.element_volume) * 9.81)
+    rho, g = float(sc.env.rho_water), float(sc.env.g)
+    W = float(line.element_mass - rho * line.element_volume) * g
     assert W > 0  # the nylon line sinks, slightly
     H = float(obs["tension"])
     M = np.array([sum(W * min(xj, xk) * (S - max(xj, xk)) / S for xj in x) for xk in x])
@@ -99,11 +100,12 @@ def test_static_sag_converges_to_the_parabola_like_one_over_N():
     errors = []
     for N in (7, 15):
         sc = with_line(ref, N=N, c_n=0.0, c_t=0.0)
-        m, line = sc.model, sc.model.line
-        obs = m.observables(0.0, sc.y0, sc.effects)
+        line = sc.model.line
+        obs = sc.observables(sc.y0)
         nodes = np.asarray(obs["nodes"])
         S = float(np.linalg.norm(nodes[-1, :2] - nodes[0, :2]))
-        w = float(line.mass_per_length - line.rho_water * np.pi / 4 * line.d**2) * 9.81
+        rho, g = float(sc.env.rho_water), float(sc.env.g)
+        w = float(line.mass_per_length - rho * np.pi / 4 * line.d**2) * g
         sag_parabola = w * S**2 / (8 * float(obs["tension"]))
         errors.append(float(obs["sag"]) / sag_parabola - 1.0)
         assert errors[-1] == pytest.approx(1.0 / N, rel=0.05)
@@ -139,7 +141,7 @@ def test_bad_input():
         TandemLine(line, line)
     m = TandemLine(ref.model, line)
     with pytest.raises(ValueError, match="Hawser"):
-        m.vector_field(0.0, jnp.zeros(m.state_shape()), ref.effects)
+        m.vector_field(0.0, jnp.zeros(m.state_shape()), ref.effects, ref.env)
     with pytest.raises(ValueError, match="hawser"):
         tandem_fishtail(hawser="rope")
     with pytest.raises(ValueError, match="line_options"):

@@ -28,6 +28,8 @@ from jaxstring.tandem.analysis import (
 from jaxstring.tandem.autopilot import NonlinearCompensator, outputs
 from jaxstring.tandem.scenes import (
     ENVIRONMENTS,
+    current_field,
+    environment,
     tandem_controlled,
     tandem_equilibria,
     tandem_fishtail,
@@ -43,6 +45,8 @@ from jaxstring.tandem.vessels import (
     ShortWingCurrent,
     Tandem,
     TurretMooring,
+    VesselKinematics,
+    current_at,
     fpso_hull,
     make_hull,
     ocimf_coefficients,
@@ -77,15 +81,17 @@ def test_derived_check_values():
     # Spec section 5 "Derived check values" [P].
     model = tandem_model()
     cur = ShortWingCurrent()
+    env = js.Environment(current=current_field(U_c=1.0))  # flowing south
     nu = jnp.zeros((2, 3))
+    kin = lambda eta: VesselKinematics(eta, nu, current_at(0.0, eta, env), model)
     north = jnp.array([[0.0, 0.0, 0.0], [-400.0, 0.0, 0.0]])
-    X = cur.loads(0.0, model, north, nu, cur.velocity())
+    X = cur.forces(0.0, kin(north), env)
     assert abs(-float(X[1, 0]) - 17.8e3) < 0.05e3  # aligned shuttle drag
     beam = north.at[0, 2].set(math.pi / 2)
-    Y = cur.loads(0.0, model, beam, nu, cur.velocity())
+    Y = cur.forces(0.0, kin(beam), env)
     assert abs(float(Y[0, 1]) - 1.8e6) / 1.8e6 < 0.03  # FPSO beam current load
     wind = OCIMFWind(speed=15.0, direction=math.pi)  # head wind for a north heading
-    W = wind.loads(0.0, model, north, nu, None)
+    W = wind.forces(0.0, kin(north), env)
     assert abs(-float(W[1, 0]) - 0.13e6) / 0.13e6 < 0.03
     # FPSO turret offset at 1 m/s head current (FPSO + shuttle drag): about 0.5 m.
     y0 = np.asarray(tandem_equilibria().y0)
@@ -103,7 +109,8 @@ def test_current_velocity_form_equals_angle_form():
     # smoothing of |.|); check at U = 1 m/s over incidence angles, r = 0.
     h = fpso_hull()
     model = MooredFPSO(fpso=h)
-    cur = ShortWingCurrent(speed=1.0, direction=0.0, yaw_rate_terms=False)
+    cur = ShortWingCurrent(yaw_rate_terms=False)
+    env = js.Environment(current=current_field(U_c=1.0, beta_c=0.0))
     L, B, T, CB, S, CY, lp = 320.0, 54.5, 21.5, 0.85, 27447.0, 0.52, 0.05
     rho, tau = 1025.0, math.pi * 21.5 / 320.0
     for alpha in np.linspace(-3.0, 3.0, 13):
@@ -111,7 +118,9 @@ def test_current_velocity_form_equals_angle_form():
         # alpha = -psi (going-to angle of the water in body axes).
         psi = -alpha
         eta = jnp.array([[0.0, 0.0, psi]])
-        F = np.asarray(cur.loads(0.0, model, eta, jnp.zeros((1, 3)), cur.velocity()))[0]
+        still = jnp.zeros((1, 3))
+        kin = VesselKinematics(eta, still, current_at(0.0, eta, env), model)
+        F = np.asarray(cur.forces(0.0, kin, env))[0]
         U = math.sqrt(1.0 + 0.01**2)  # the velocity form's floored speed
         q = 0.5 * rho * L * T * U**2
         Cf = 0.09375 / (math.log10(U * L / 1e-6) - 2) ** 2
@@ -165,8 +174,8 @@ def test_absent_effect_is_not_traced():
     sc = tandem_equilibria()
     windy = tandem_equilibria(V_w=1e-12)
     y = sc.y0
-    f0 = lambda y: sc.model.vector_field(0.0, y, sc.effects)
-    f1 = lambda y: windy.model.vector_field(0.0, y, windy.effects)
+    f0 = lambda y: sc.vector_field(0.0, y)
+    f1 = lambda y: windy.vector_field(0.0, y)
     n0 = len(jax.make_jaxpr(f0)(y).eqns)
     n1 = len(jax.make_jaxpr(f1)(y).eqns)
     assert n1 > n0 + 20
@@ -496,7 +505,9 @@ def test_gradient_of_collision_cost_wrt_gains():
 @pytest.mark.parametrize(
     "make, name",
     [
-        (lambda: ShortWingCurrent(speed=-1.0), "`speed`"),
+        (lambda: environment(U_c=-1.0), "`U_c`"),
+        (lambda: js.Environment(rho_water=-1025.0), "`rho_water`"),
+        (lambda: js.Environment(rho_air=0.0), "`rho_air`"),
         (lambda: OCIMFWind(speed=-5.0), "`speed`"),
         (lambda: tandem_equilibria(U_c=-1.0), "`U_c`"),
         (lambda: tandem_equilibria(V_w=-1.0), "`V_w`"),

@@ -19,8 +19,8 @@ step's start (the production stiff codes' choice) and falls back to the damped f
 Newton from the step's start when they stall. Measured (k = 20, EA = 1e6, dt =
 0.005 s, Newton tolerance 1e-10): implicit Euler in natural variables
 2.8x faster with the chord; in displacement variables the chord diverges at this
-step (the stiff axis turns with the string; see `jaxstring._solvers.stage_newton`) and the
-fallback makes it about 5 % slower; the trapezoidal rule gains nothing. The
+step (the stiff axis turns with the string; see `jaxstring._solvers.stage_newton`)
+and the fallback makes it about 5 % slower; the trapezoidal rule gains nothing. The
 Jacobian is banded for strings and chains (a few coloured JVPs and block cyclic
 reduction, ``jaxstring._linalg``), so a step stays O(k). The iteration stops when
 the scaled update (atol + rtol |y|, RMS) is below `kappa` (chord: the update times

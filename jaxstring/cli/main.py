@@ -70,6 +70,7 @@ def _pendulum_arguments(p: argparse.ArgumentParser) -> None:
 
 def _pendulum_build(a: argparse.Namespace):
     from .. import scenes
+
     effects = tuple(scenes.DEFAULT_PENDULUM_EFFECTS)
     if a.slack:
         effects = effects + ("slack",)
@@ -141,6 +142,7 @@ def _tether_arguments(p: argparse.ArgumentParser) -> None:
 def _tether_build(name: str):
     def build(a: argparse.Namespace):
         from .. import scenes
+
         return getattr(scenes, name)(
             method=a.method, N=a.N, t1=a.t1, smoothing=a.smoothing, k_lms=a.k_lms
         )
@@ -154,6 +156,7 @@ def _tether_parameters(a: argparse.Namespace) -> dict:
 
 def _tether_figure(traj, path, title=""):
     from ..tether import plot as tether_plot
+
     return tether_plot.summary_figure(traj, path, title=title)
 
 

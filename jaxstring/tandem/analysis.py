@@ -56,7 +56,7 @@ def residual(q, scene: Scene):
     """Scaled body loads at the zero-velocity state of `q` (zero at equilibrium)."""
     n = _n(scene)
     y = state_from_q(q, n)
-    f = scene.model.vector_field(0.0, y, scene.effects).reshape(n, 6)[:, 3:]
+    f = scene.vector_field(0.0, y).reshape(n, 6)[:, 3:]
     h = scene.model.hulls()
     # At zero velocity nu_dot = M^{-1} tau exactly (the Coriolis terms vanish).
     tau = f * jnp.stack([h.m11, h.m22, h.m66], axis=1)
@@ -140,7 +140,7 @@ def tandem_start(model: Tandem, l0, psi1, psi2):
 
 @eqx.filter_jit
 def _jacobian(scene, y):
-    return jax.jacfwd(lambda y: scene.model.vector_field(0.0, y, scene.effects))(y)
+    return jax.jacfwd(lambda y: scene.vector_field(0.0, y))(y)
 
 
 def jacobian(scene: Scene, y):

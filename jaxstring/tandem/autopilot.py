@@ -17,7 +17,7 @@ from jaxtyping import Array, Float
 from .._validate import check_nonnegative, check_positive
 from .vessels import (
     AbstractActuator,
-    current_velocity,
+    current_at,
     point_acceleration,
     point_kinematics,
     rot,
@@ -66,8 +66,8 @@ def outputs(model, y, nu_dot=None):
     return y_out, y_dot, jnp.stack([y1dd, y2dd])
 
 
-def _nu_dot(model, t, y, effects, u):
-    return model.vector_field_with_input(t, y, effects, u).reshape(2, 6)[:, 3:]
+def _nu_dot(model, t, y, effects, env, u):
+    return model.vector_field_with_input(t, y, effects, env, u).reshape(2, 6)[:, 3:]
 
 
 class NonlinearCompensator(AbstractActuator):
@@ -112,12 +112,12 @@ class NonlinearCompensator(AbstractActuator):
         zeta = jnp.broadcast_to(jnp.asarray(zeta, dtype=jnp.float64), (2,))
         return cls(K_P=omega**2, K_D=2 * zeta * omega, **kw)
 
-    def command(self, t, y, model, effects):
+    def command(self, t, y, model, effects, env):
         m = model if self.internal_model is None else self.internal_model
         eff = effects if self.internal_effects is None else self.internal_effects
 
         def ydd(u):
-            return outputs(m, y, _nu_dot(m, t, y, eff, u))[2]
+            return outputs(m, y, _nu_dot(m, t, y, eff, env, u))[2]
 
         zero = jnp.zeros(2, y.dtype)
         a = ydd(zero)
@@ -161,11 +161,11 @@ class ComputedForcePD(AbstractActuator):
         zeta = jnp.broadcast_to(jnp.asarray(zeta, dtype=jnp.float64), (2,))
         return cls(K_P=omega**2, K_D=2 * zeta * omega, **kw)
 
-    def command(self, t, y, model, effects):
-        tau = vessel_loads(model, t, y, effects)[1]
+    def command(self, t, y, model, effects, env):
+        tau = vessel_loads(model, t, y, effects, env)[1]
         h = model.shuttle
         s = y.reshape(2, 6)
-        vc = rot(s[1, 2]).T @ current_velocity(effects)
+        vc = rot(s[1, 2]).T @ current_at(t, s[:, :3], env)[1]
         v_r, r = s[1, 4] - vc[1], s[1, 5]
         y_out, y_dot, _ = outputs(model, y)
         X = h.m11 * (self.K_P[0] * (y_out[0] - self.d_ref) + self.K_D[0] * y_dot[0])

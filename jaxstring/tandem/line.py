@@ -34,7 +34,7 @@ import optimistix as optx
 
 from .._model import AbstractModel
 from .._validate import check_finite, check_int, check_positive
-from ..tether.effects import AbstractTetherLoad, Buoyancy, Drag, UniformCurrent, Weight
+from ..tether.effects import AbstractTetherLoad, Buoyancy, Drag, Weight
 from ..tether.models import AbstractTether, CoupledEnd, EndKinematics, LmsTether
 from .vessels import (
     AbstractActuator,
@@ -43,7 +43,6 @@ from .vessels import (
     Tandem,
     _point_load,
     _rhs,
-    current_velocity,
     hull_clearance,
     point_acceleration,
     point_kinematics,
@@ -105,6 +104,11 @@ class TandemLine(AbstractModel):
     line: AbstractTether
     controller_hawser: Hawser
     projects: ClassVar[bool] = False
+    accepts: ClassVar[tuple[type, ...]] = (
+        AbstractVesselLoad,
+        AbstractActuator,
+        AbstractTetherLoad,
+    )
 
     def __init__(self, tandem, line, controller_hawser=None):
         if not isinstance(tandem, Tandem):
@@ -174,38 +178,44 @@ class TandemLine(AbstractModel):
         """The effects a controller sees: the vessel effects and its hawser model."""
         return tuple(vessel_effects) + (self.controller_hawser,)
 
-    def _command(self, t, yv, vessel_effects):
+    def _command(self, t, yv, vessel_effects, env):
         acts = [e for e in vessel_effects if isinstance(e, AbstractActuator)]
         if len(acts) > 1:
             raise ValueError("a scene may name at most one actuator (controller).")
         if not acts:
             return None
         act = acts[0]
-        u = act.command(t, yv, self.tandem, self.controller_effects(vessel_effects))
+        u = act.command(
+            t, yv, self.tandem, self.controller_effects(vessel_effects), env
+        )
         return jnp.stack([smooth_clip(u[0], act.X_max), smooth_clip(u[1], act.N_max)])
 
-    def _rates(self, t, y, effects):
+    def _rates(self, t, y, effects, env):
         vessel, line_eff = split_line_effects(effects)
         yv, yl = self.split(y)
-        u = self._command(t, yv, vessel)
+        u = self._command(t, yv, vessel, env)
         loads = tuple(e for e in vessel if isinstance(e, AbstractVesselLoad))
         root, fast = self._mounts(yv)
-        dyl, f_root, f_fast = self.line.rates(t, yl, line_eff, root=root, fast=fast)
-        dyv = _rhs(self.tandem, t, yv, loads, u, self._line_tau(yv, f_root, f_fast))
+        line_rates = lambda root, fast: self.line.rates(
+            t, yl, line_eff, env, root=root, fast=fast
+        )
+        dyl, f_root, f_fast = line_rates(root, fast)
+        tau = self._line_tau(yv, f_root, f_fast)
+        dyv = _rhs(self.tandem, t, yv, loads, env, u, tau)
         if not isinstance(self.line, LmsTether):
             # Rigid end links: the end forces depend on the mount accelerations.
             nu_dot = dyv.reshape(2, 6)[:, 3:]
             root, fast = self._mounts(yv, nu_dot)
-            dyl, f_root, f_fast = self.line.rates(t, yl, line_eff, root=root, fast=fast)
+            dyl, f_root, f_fast = line_rates(root, fast)
             tau = self._line_tau(yv, f_root, f_fast)
-            dyv = _rhs(self.tandem, t, yv, loads, u, tau)
+            dyv = _rhs(self.tandem, t, yv, loads, env, u, tau)
         return dyv, dyl, f_fast, u, root, fast
 
-    def vector_field(self, t, y, effects):
-        dyv, dyl, *_ = self._rates(t, y, effects)
+    def vector_field(self, t, y, effects, env):
+        dyv, dyl, *_ = self._rates(t, y, effects, env)
         return self.join(dyv, dyl)
 
-    def observables(self, t, y, effects):
+    def observables(self, t, y, effects, env):
         """As `Tandem.observables` (span = fairlead distance, `tension` = the
         horizontal line force on the shuttle's fairlead), plus the line's `nodes`
         (N + 2, 3), `line_tension` (N + 1,) and `sag` (deepest node below the
@@ -215,13 +225,13 @@ class TandemLine(AbstractModel):
         eta = s[:, :3]
         # the mounts the vector field used (with their accelerations, for rigid
         # end links), so that the link tensions are the ones it applied
-        _, _, f_fast, u, root, fast = self._rates(t, y, effects)
+        _, _, f_fast, u, root, fast = self._rates(t, y, effects, env)
         _, line_eff = split_line_effects(effects)
         P1, P2 = root.position[:2], fast.position[:2]
         D = P1 - P2
         span = jnp.sqrt(jnp.sum(D * D))
         nodes = jnp.concatenate([root.position[None], yl[:, :3], fast.position[None]])
-        ch_T = self.line._tensions(self.line._chain(t, yl, line_eff, root, fast))
+        ch_T = self.line._tensions(self.line._chain(t, yl, line_eff, env, root, fast))
         psi_L = jnp.arctan2(D[1], D[0])
         return {
             "positions": eta[:, :2],
@@ -244,7 +254,6 @@ def hawser_line(
     N=8,
     d=0.16,
     mass_per_length=25.0,
-    rho_water=1025.0,
     added_mass=1.0,
     damping=0.0,
 ) -> LmsTether:
@@ -259,7 +268,6 @@ def hawser_line(
         L=l0,
         d=d,
         mass_per_length=mass_per_length,
-        rho_water=rho_water,
         added_mass=added_mass,
         k=k_h * l0,
         c=damping,
@@ -269,30 +277,23 @@ def hawser_line(
     )
 
 
-def line_effects(vessel_effects, c_n=1.0, c_t=0.1, g=9.81):
-    """Weight, buoyancy and drag on the line, in the vessels' current (earth axes,
-    from the scene's `ShortWingCurrent`; still water without one)."""
-    vc = current_velocity(vessel_effects)
-    current = UniformCurrent(jnp.concatenate([vc, jnp.zeros(1)]))
+def line_effects(c_n=1.0, c_t=0.1):
+    """Weight, buoyancy and drag on the line (in the scene's current, the one the
+    vessels feel)."""
     # Drag's c_t acts on the wetted surface pi d l_e; c_t / pi puts it on the
     # projected area d l_e, as the tether scenes do (see jaxstring.tether.scenes).
-    return (
-        Weight(g=g),
-        Buoyancy(g=g),
-        Drag(c_n=c_n, c_t=c_t / jnp.pi, current=current),
-    )
+    return (Weight(), Buoyancy(), Drag(c_n=c_n, c_t=c_t / jnp.pi))
 
 
 def _static_residual(p, args):
-    line, root, fast, line_eff = args
+    line, root, fast, line_eff, env = args
     yl = jnp.concatenate([p, jnp.zeros_like(p)], axis=1)
-    dy, _, _ = line.rates(0.0, yl, line_eff, root=root, fast=fast)
-    return dy[:, 3:] * line.inertia
+    dy, _, _ = line.rates(0.0, yl, line_eff, env, root=root, fast=fast)
+    return dy[:, 3:] * line.inertia(env)
 
 
-def _equilibrium_residual(y, args):
-    model, effects = args
-    return model.vector_field(0.0, y, effects)
+def _equilibrium_residual(y, scene):
+    return scene.vector_field(0.0, y)
 
 
 @eqx.filter_jit
@@ -305,9 +306,9 @@ def _root(fn, y0, args, max_steps, tol):
     return sol.value, jnp.max(jnp.abs(fn(sol.value, args)))
 
 
-def static_line(model: TandemLine, yv, effects, sag_guess=None, max_steps=100):
+def static_line(model: TandemLine, yv, effects, env, sag_guess=None, max_steps=100):
     """The line's static shape between the fairleads of vessel state `yv` (vessels
-    held still; drag of the current on the still line included): Newton
+    held still; drag of the current of `env` on the still line included): Newton
     (optimistix) on the node forces, from a parabolic guess of depth `sag_guess`
     (m). Returns the line state `(N, 6)` (velocities zero); raises if no shape is
     found."""
@@ -322,7 +323,8 @@ def static_line(model: TandemLine, yv, effects, sag_guess=None, max_steps=100):
     straight = root.position + s[:, None] * (fast.position - root.position)
     sag = 0.0 if sag_guess is None else sag_guess
     p0 = straight.at[:, 2].add(-4.0 * sag * s * (1 - s))
-    p, res = _root(_static_residual, p0, (line, root, fast, line_eff), max_steps, 1e-12)
+    args = (line, root, fast, line_eff, env)
+    p, res = _root(_static_residual, p0, args, max_steps, 1e-12)
     res = float(res)
     if not np.isfinite(res) or res > 1e-3:
         raise ValueError(
@@ -332,11 +334,12 @@ def static_line(model: TandemLine, yv, effects, sag_guess=None, max_steps=100):
     return jnp.concatenate([p, jnp.zeros_like(p)], axis=1)
 
 
-def line_equilibrium(model: TandemLine, y_guess, effects, max_steps=200):
-    """The coupled equilibrium (vessels and line at rest) nearest `y_guess`,
-    Newton (optimistix) on the full vector field. Returns `(y, max |residual|)`."""
-    y_guess = jnp.asarray(y_guess, jnp.float64)
-    y, res = _root(_equilibrium_residual, y_guess, (model, effects), max_steps, 1e-11)
+def line_equilibrium(scene, y_guess=None, max_steps=200):
+    """The coupled equilibrium (vessels and line at rest) of a `TandemLine` scene
+    nearest `y_guess` (default: the scene's `y0`), Newton (optimistix) on the full
+    vector field. Returns `(y, max |residual|)`."""
+    y_guess = scene.y0 if y_guess is None else jnp.asarray(y_guess, jnp.float64)
+    y, res = _root(_equilibrium_residual, y_guess, scene, max_steps, 1e-11)
     return y, float(res)
 
 
@@ -374,24 +377,24 @@ def with_line(
         N=N,
         d=d,
         mass_per_length=mass_per_length,
-        rho_water=1025.0,
         damping=damping,
     )
     model = TandemLine(scene.model, line, controller_hawser=hawser)
     vessel = tuple(e for e in scene.effects if not isinstance(e, Hawser))
-    eff = line_effects(vessel, c_n=c_n, c_t=c_t)
+    eff = line_effects(c_n=c_n, c_t=c_t)
     if not gravity:
         eff = eff[2:]
     if c_n == 0.0 and c_t == 0.0:
         eff = tuple(e for e in eff if not isinstance(e, Drag))
     eff = vessel + eff
     yv = jnp.asarray(scene.y0)
-    w = (line.mass_per_length - line.rho_water * 0.25 * jnp.pi * line.d**2) * 9.81
+    env = scene.env
+    w = (line.mass_per_length - env.rho_water * 0.25 * jnp.pi * line.d**2) * env.g
     T0 = jnp.maximum(
         hawser.tension(scene.model, yv.reshape(2, 6)[:, :3], jnp.zeros((2, 3))), 1e3
     )
     sag = float(w * hawser.l0**2 / (8 * T0)) if gravity else 0.0
-    yl = static_line(model, yv, eff, sag_guess=sag)
+    yl = static_line(model, yv, eff, env, sag_guess=sag)
     y0 = model.join(yv, yl)
     return Scene(
         model=model,
@@ -400,4 +403,5 @@ def with_line(
         t1=scene.t1,
         t0=scene.t0,
         name=name or scene.name + "-line",
+        env=env,
     )

@@ -9,6 +9,7 @@ import math
 
 import jax.numpy as jnp
 
+from .._environment import Environment, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator
@@ -22,9 +23,9 @@ from .vessels import (
     ShortWingCurrent,
     Tandem,
     TurretMooring,
-    current_velocity,
     fpso_hull,
     shuttle_hull,
+    vessel_loads,
 )
 
 
@@ -37,17 +38,26 @@ ENVIRONMENTS = {
 }
 
 
+def current_field(U_c=1.0, beta_c=math.pi) -> UniformCurrent:
+    """The spec's steady uniform current: speed `U_c` (m/s) flowing toward
+    `beta_c` (rad from north, clockwise; pi = flowing south), earth axes."""
+    return UniformCurrent(
+        jnp.stack([U_c * jnp.cos(beta_c), U_c * jnp.sin(beta_c), jnp.zeros(())])
+    )
+
+
 def environment(U_c=1.0, V_w=0.0, Delta_w_deg=0.0, beta_c=math.pi):
-    """Current (and wind when `V_w` > 0) effects of the spec's environment."""
+    """The spec's environment: `(effects, env)`, the current's and (when `V_w` > 0)
+    the wind's load effects and the `Environment` holding the current."""
     check_nonnegative("U_c", U_c, "m/s")
     check_nonnegative("V_w", V_w, "m/s")
     check_finite("Delta_w_deg", Delta_w_deg)
-    effects = (ShortWingCurrent(speed=U_c, direction=beta_c),)
+    effects = (ShortWingCurrent(),)
     if not (isinstance(V_w, (int, float)) and V_w == 0.0):
         # Spec section 6: the wind blows toward beta_w = pi + Delta_w (beta_c = pi).
         beta_w = beta_c + math.radians(Delta_w_deg)
         effects += (OCIMFWind(speed=V_w, direction=beta_w),)
-    return effects
+    return effects, Environment(current=current_field(U_c, beta_c))
 
 
 def tandem_model(x_t=None, x_h1=None, x_h2=None, fpso=None, shuttle=None) -> Tandem:
@@ -61,19 +71,17 @@ def tandem_model(x_t=None, x_h1=None, x_h2=None, fpso=None, shuttle=None) -> Tan
     return Tandem(fpso=fpso, shuttle=shuttle, **kw)
 
 
-def _axial_loads(model, effects, psi):
+def _axial_loads(model, effects, env, psi):
     """Surge loads on each vessel at rest, heading `psi`, from current and wind."""
     n = model.n_vessels
-    eta = jnp.stack([jnp.array([0.0, 0.0, psi])] * n)
-    nu = jnp.zeros((n, 3))
-    vc = current_velocity(effects)
-    X = jnp.zeros(n)
-    for e in effects:
-        if isinstance(e, AbstractVesselLoad) and not isinstance(
-            e, (Hawser, TurretMooring)
-        ):
-            X = X + e.loads(0.0, model, eta, nu, vc)[:, 0]
-    return X
+    y = jnp.tile(jnp.array([0.0, 0.0, psi, 0.0, 0.0, 0.0]), n)
+    loads = tuple(
+        e
+        for e in effects
+        if isinstance(e, AbstractVesselLoad)
+        and not isinstance(e, (Hawser, TurretMooring))
+    )
+    return vessel_loads(model, 0.0, y, loads, env)[:, 0]
 
 
 def _mooring_offset(mooring: TurretMooring, F):
@@ -85,13 +93,13 @@ def _mooring_offset(mooring: TurretMooring, F):
     return r
 
 
-def aligned_equilibrium(model, effects, F_ast=0.0, heading=0.0):
+def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     """The aligned equilibrium (both vessels heading `heading`, shuttle astern) for
     loads along that axis (current, and wind along the current): exact, from the
     surge balances. Returns the state."""
     hawsers = [e for e in effects if isinstance(e, Hawser)]
     moorings = [e for e in effects if isinstance(e, TurretMooring)]
-    X = _axial_loads(model, effects, heading)
+    X = _axial_loads(model, effects, env, heading)
     e = jnp.stack([jnp.cos(heading), jnp.sin(heading)])
     if model.n_vessels == 1:
         r = _mooring_offset(moorings[0], -X[0])
@@ -131,22 +139,25 @@ def tandem_fpso_alone(
     check_finite("psi0_deg", psi0_deg)
     fpso = fpso_hull()
     model = MooredFPSO(fpso=fpso, x_t=x_t_over_L * fpso.L)
-    effects = (ShortWingCurrent(speed=U_c), TurretMooring(k_m=k_m, c_m=c_m))
-    y = aligned_equilibrium(model, effects)
+    effects = (ShortWingCurrent(), TurretMooring(k_m=k_m, c_m=c_m))
+    env = Environment(current=current_field(U_c))
+    y = aligned_equilibrium(model, effects, env)
     a = math.radians(psi0_deg)
     PT = y[:2] + model.x_t * jnp.array([1.0, 0.0])
     y = y.at[:2].set(PT - model.x_t * jnp.array([math.cos(a), math.sin(a)]))
     y = y.at[2].set(a)
-    return Scene(model=model, effects=effects, y0=y, t1=t1, name="tandem-fpso-alone")
+    return Scene(
+        model=model, effects=effects, y0=y, t1=t1, name="tandem-fpso-alone", env=env
+    )
 
 
 def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None):
-    eff = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Delta_w_deg)
+    eff, env = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Delta_w_deg)
     hawser = Hawser(l0=l0, k_h=k_h) if hawser is None else hawser
     eff = eff + (hawser, TurretMooring())
     if F_ast is not None:
         eff = eff + (ConstantThrust(F_ast=F_ast),)
-    return eff
+    return eff, env
 
 
 def tandem_equilibria(
@@ -156,9 +167,11 @@ def tandem_equilibria(
     state (exact equilibrium for the current alone or wind along it). Use
     `find_equilibria(scene)` for all equilibria."""
     model = tandem_model(x_t=x_t)
-    eff = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None)
-    y0 = aligned_equilibrium(model, eff)
-    return Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-equilibria")
+    eff, env = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None)
+    y0 = aligned_equilibrium(model, eff, env)
+    return Scene(
+        model=model, effects=eff, y0=y0, t1=t1, name="tandem-equilibria", env=env
+    )
 
 
 def _hawser_kind(scene, hawser, line_options):
@@ -194,10 +207,10 @@ def tandem_fishtail(
     check_finite("perturbation_deg", perturbation_deg)
     check_positive("U_c", U_c, "m/s")
     model = tandem_model()
-    eff = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
-    y0 = aligned_equilibrium(model, eff, F_ast=F_ast)
+    eff, env = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
+    y0 = aligned_equilibrium(model, eff, env, F_ast=F_ast)
     y0 = _perturb_shuttle_heading(model, y0, math.radians(perturbation_deg))
-    sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail")
+    sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail", env=env)
     return _hawser_kind(sc, hawser, line_options)
 
 
@@ -206,7 +219,12 @@ def tandem_hopf(F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0) -> Scen
     43 kN (spec). Sweep `F_ast` with `hopf_sweep`."""
     sc = tandem_fishtail(F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c)
     return Scene(
-        model=sc.model, effects=sc.effects, y0=sc.y0, t1=t1, name="tandem-hopf"
+        model=sc.model,
+        effects=sc.effects,
+        y0=sc.y0,
+        t1=t1,
+        name="tandem-hopf",
+        env=sc.env,
     )
 
 
@@ -259,11 +277,10 @@ def tandem_controlled(
     ctl = cls.from_bandwidth(
         omega=omega, zeta=zeta, d_ref=d_ref, X_max=X_max, N_max=N_max
     )
-    eff = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw) + (
-        spec_hawser,
-        TurretMooring(),
-        ctl,
-    )
+    eff, env_ = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw)
+    eff = eff + (spec_hawser, TurretMooring(), ctl)
     y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
-    sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled")
+    sc = Scene(
+        model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled", env=env_
+    )
     return _hawser_kind(sc, hawser, line_options)

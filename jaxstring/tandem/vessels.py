@@ -12,16 +12,21 @@ Loads are effects (a scene names the ones it calls for; an absent load is not
 traced):
 
 * ``ShortWingCurrent``: the Leite et al. (1998) short-wing static current model
-  plus the yaw-rate terms (3.1). It is also the current *field*: the kinetics are
-  written in velocities relative to the water, and a scene without a current has
-  still water.
+  plus the yaw-rate terms (3.1), in the scene's current (``Environment.current``,
+  evaluated at each vessel at the surface). The kinetics are written in velocities
+  relative to the water; a scene without a current has still water.
 * ``OCIMFWind``: OCIMF (1977) tanker wind coefficients, smooth Fourier fit (3.2).
 * ``Hawser``: tension-only nonlinear hawser with smooth slack (3.3).
 * ``TurretMooring``: isotropic hardening spring + damper at the FPSO turret (3.4).
 * ``LinearDamping``: optional extra linear damping (3.5).
 * ``ConstantThrust``: the uncontrolled shuttle actuator (astern pull, 3.6); the
-  feedback controllers are in ``_control.py``. Every actuator is saturated
+  feedback controllers are in ``autopilot.py``. Every actuator is saturated
   smoothly at its limits (`X_max`, `N_max`).
+
+Every load is an ``AbstractVesselLoad`` (the one protocol of
+``jaxstring.AbstractLoad``): ``forces(t, kin, env)`` maps the vessels' kinematics
+(``VesselKinematics``) and the scene's ``Environment`` (water and air density,
+viscosity, current) to body-axis loads (X, Y, N) on each vessel.
 
 Earth frame: x north, y east, angles clockwise from north seen from above.
 """
@@ -35,14 +40,11 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._effect import AbstractEffect, AbstractLoad
+from .._environment import Environment
 from .._model import AbstractModel
 from .._validate import check_finite, check_nonnegative, check_positive, is_concrete
-from ..pendulum.effects import AbstractEffect
 
-
-RHO_WATER = 1025.0  # kg/m^3 [S1]
-RHO_AIR = 1.225  # kg/m^3 [S1]
-NU_WATER = 1.0e-6  # m^2/s [S1]
 
 # Smoothing of |x| and sgn(x) (spec 3.1, [R]).
 EPS_V = 1e-3  # m/s
@@ -142,13 +144,17 @@ class Hull(eqx.Module):
 
 
 def make_hull(
-    L, B, T, C_B, S, A_F, A_L, m=None, I_z=None, C_Y=0.55, lam_p=0.05, rho=RHO_WATER
+    L, B, T, C_B, S, A_F, A_L, m=None, I_z=None, C_Y=0.55, lam_p=0.05, rho=None
 ) -> Hull:
     """A `Hull` with the spec's added masses (section 5).
 
     `m` defaults to rho L B T C_B, `I_z` to (0.25 L)^2 m; A11 is Soding's surge added
-    mass 2.7 rho V^(5/3)/L^2 [S2], A22 and A66 Clarke et al. (1983) [S3].
+    mass 2.7 rho V^(5/3)/L^2 [S2], A22 and A66 Clarke et al. (1983) [S3]. `rho`:
+    the water the hull floats in, kg/m^3 (default `Environment().rho_water`, the
+    spec's sea water).
     """
+    if rho is None:
+        rho = float(Environment().rho_water)
     for name, v, unit in (
         ("L", L, "m"),
         ("B", B, "m"),
@@ -230,15 +236,30 @@ def _stack(*hulls):
 # Effects
 
 
-class AbstractVesselLoad(AbstractEffect):
+class VesselKinematics(eqx.Module):
+    """Kinematics of the vessels, handed to the loads.
+
+    **Fields:**
+
+    - `eta`: positions and headings `(n, 3)` (m, m, rad).
+    - `nu`: body velocities `(n, 3)` (m/s, m/s, rad/s).
+    - `current`: the water velocity at each vessel, earth axes, `(n, 2)` m/s.
+    - `vessels`: the model (its hulls, `hulls()`, and attachment points `x_t`,
+      `x_h1`, `x_h2`).
+    """
+
+    eta: Float[Array, "n 3"]
+    nu: Float[Array, "n 3"]
+    current: Float[Array, "n 2"]
+    vessels: AbstractModel
+
+
+class AbstractVesselLoad(AbstractLoad):
     """A load on the vessels: body-axis (X, Y, N) on each vessel."""
 
     @abc.abstractmethod
-    def loads(self, t, model, eta, nu, vc) -> Array:
-        """Body-axis loads, shape `(n_vessels, 3)` (N, N, N m).
-
-        `eta`, `nu`: `(n, 3)` positions/headings and body velocities; `vc`: the
-        current velocity in earth axes, `(2,)` m/s."""
+    def forces(self, t, kin: VesselKinematics, env) -> Array:
+        """Body-axis loads, shape `(n_vessels, 3)` (N, N, N m)."""
 
 
 class AbstractActuator(AbstractEffect):
@@ -250,51 +271,37 @@ class AbstractActuator(AbstractEffect):
     N_max: eqx.AbstractVar[Float[Array, ""]]
 
     @abc.abstractmethod
-    def command(self, t, y, model, effects) -> Array:
-        """Unsaturated (X_ctl, N_ctl), N and N m."""
+    def command(self, t, y, model, effects, env) -> Array:
+        """Unsaturated (X_ctl, N_ctl), N and N m, at state `y` of `model` under the
+        scene's `effects` in `env`."""
 
 
 class ShortWingCurrent(AbstractVesselLoad):
-    """Steady uniform current and its load: short-wing model + yaw-rate terms.
+    """The current's load on the hulls: short-wing model + yaw-rate terms.
+
+    The current is the scene's `Environment.current` (for the spec's steady
+    current of speed U_c flowing toward beta_c: `UniformCurrent((U_c cos beta_c,
+    U_c sin beta_c, 0))`, see `current_field`); the water density and viscosity
+    are `Environment.rho_water` and `Environment.nu_water`.
 
     **Arguments:**
 
-    - `speed`: current speed U_c, m/s (>= 0).
-    - `direction`: direction *toward which* it flows, rad from north (clockwise);
-      pi = flowing south.
-    - `rho`: water density, kg/m^3. `nu`: kinematic viscosity, m^2/s.
     - `yaw_rate_terms`: include the yaw-rate (dynamic) terms (static).
     - `surge_yaw_term`: include the surge `-(pi/4) rho T^2 L v_r r` term, which may
       overlap with the `-A22 v_r r` Coriolis term (spec 2.2; kept by default as
       in the prototype).
     """
 
-    speed: Float[Array, ""] = _param(1.0)
-    direction: Float[Array, ""] = _param(math.pi)
-    rho: Float[Array, ""] = _param(RHO_WATER)
-    nu: Float[Array, ""] = _param(NU_WATER)
     yaw_rate_terms: bool = eqx.field(static=True, default=True)
     surge_yaw_term: bool = eqx.field(static=True, default=True)
 
-    def __check_init__(self):
-        check_nonnegative("speed", self.speed, "m/s")
-        check_finite("direction", self.direction)
-        check_positive("rho", self.rho, "kg/m^3")
-        check_positive("nu", self.nu, "m^2/s")
-
-    def velocity(self):
-        """Current velocity in earth axes, m/s."""
-        return self.speed * jnp.stack(
-            [jnp.cos(self.direction), jnp.sin(self.direction)]
-        )
-
-    def loads(self, t, model, eta, nu, vc):
+    def forces(self, t, kin, env):
         del t
-        hulls = model.hulls()
-        return jax.vmap(self._one, in_axes=(0, 0, 0, None))(hulls, eta, nu, vc)
+        one = lambda h, eta, nu, vc: self._one(h, eta, nu, vc, env)
+        return jax.vmap(one)(kin.vessels.hulls(), kin.eta, kin.nu, kin.current)
 
-    def _one(self, h, eta, nu, vc):
-        rho = self.rho
+    def _one(self, h, eta, nu, vc, env):
+        rho = env.rho_water
         u, v, r = nu
         uc, vc_b = rot(eta[2]).T @ vc
         u_r, v_r = u - uc, v - vc_b
@@ -302,7 +309,7 @@ class ShortWingCurrent(AbstractVesselLoad):
         U = jnp.sqrt(uf * uf + vf * vf + EPS_U**2)
         L, T, B = h.L, h.T, h.B
         tau = math.pi * T / L
-        Re = U * L / self.nu
+        Re = U * L / env.nu_water
         Cf = 0.09375 / (jnp.log10(Re) - 2.0) ** 2
         avf, auf = _sabs(vf, EPS_V), _sabs(uf, EPS_V)
         q = 0.5 * rho * L * T
@@ -372,35 +379,32 @@ class OCIMFWind(AbstractVesselLoad):
 
     - `speed`: wind speed at 10 m, m/s (>= 0).
     - `direction`: direction *toward which* it blows, rad from north.
-    - `rho`: air density, kg/m^3.
     - `loading`: coefficient set per vessel, `"loaded"` or `"ballast"` (static;
       default loaded for both).
     """
 
     speed: Float[Array, ""] = _param(0.0)
     direction: Float[Array, ""] = _param(math.pi)
-    rho: Float[Array, ""] = _param(RHO_AIR)
     loading: tuple[str, ...] = eqx.field(static=True, default=("loaded", "loaded"))
 
     def __check_init__(self):
         check_nonnegative("speed", self.speed, "m/s")
         check_finite("direction", self.direction)
-        check_positive("rho", self.rho, "kg/m^3")
         for s in self.loading:
             if s not in OCIMF_FIT:
                 raise ValueError(
                     f"`loading` must hold 'loaded' or 'ballast'; got {s!r}."
                 )
 
-    def loads(self, t, model, eta, nu, vc):
-        del t, vc
-        hulls = model.hulls()
-        n = eta.shape[0]
+    def forces(self, t, kin, env):
+        del t
+        n = kin.eta.shape[0]
         coef = jnp.asarray([OCIMF_FIT[self.loading[i]] for i in range(n)])
         Vw = self.speed * jnp.stack([jnp.cos(self.direction), jnp.sin(self.direction)])
-        return jax.vmap(self._one, in_axes=(0, 0, 0, 0, None))(hulls, eta, nu, coef, Vw)
+        one = lambda h, eta, nu, c: self._one(h, eta, nu, c, Vw, env.rho_air)
+        return jax.vmap(one)(kin.vessels.hulls(), kin.eta, kin.nu, coef)
 
-    def _one(self, h, eta, nu, coef, Vw):
+    def _one(self, h, eta, nu, coef, Vw, rho_air):
         ua, va = rot(eta[2]).T @ Vw - nu[:2]
         Va2 = ua * ua + va * va + EPS_V**2
         Va = jnp.sqrt(Va2)
@@ -412,7 +416,7 @@ class OCIMFWind(AbstractVesselLoad):
         cosk = jnp.stack([jnp.ones_like(c1), c1, c2, c3, c4])
         sink = jnp.stack([jnp.zeros_like(s1), s1, s2, s3, s4])
         CX, CY, CN = coef[0] @ cosk, coef[1] @ sink, coef[2] @ sink
-        q = 0.5 * self.rho * Va2
+        q = 0.5 * rho_air * Va2
         return jnp.stack([q * h.A_F * CX, q * h.A_L * CY, q * h.A_L * h.L * CN])
 
 
@@ -469,8 +473,9 @@ class Hawser(AbstractVesselLoad):
         T = self.tension_of_stretch(delta)
         return T + self.c_h * d_dot * jax.nn.sigmoid(delta / self.s)
 
-    def loads(self, t, model, eta, nu, vc):
-        del t, vc
+    def forces(self, t, kin, env):
+        del t, env
+        model, eta, nu = kin.vessels, kin.eta, kin.nu
         _require_tandem(model, "Hawser")
         _, e, _, _ = self.geometry(model, eta, nu)
         T = self.tension(model, eta, nu)
@@ -500,8 +505,9 @@ class TurretMooring(AbstractVesselLoad):
         check_positive("rho_m", self.rho_m, "m")
         check_nonnegative("c_m", self.c_m, "N s/m")
 
-    def loads(self, t, model, eta, nu, vc):
-        del t, vc
+    def forces(self, t, kin, env):
+        del t, env
+        model, eta, nu = kin.vessels, kin.eta, kin.nu
         P, V = point_kinematics(eta[0], nu[0], model.x_t)
         F = -self.k_m * (1 + jnp.sum(P * P) / self.rho_m**2) * P - self.c_m * V
         out = jnp.zeros_like(eta)
@@ -520,13 +526,13 @@ class LinearDamping(AbstractVesselLoad):
         check_nonnegative("fpso", self.fpso)
         check_nonnegative("shuttle", self.shuttle)
 
-    def loads(self, t, model, eta, nu, vc):
-        del t
-        n = eta.shape[0]
+    def forces(self, t, kin, env):
+        del t, env
+        n = kin.eta.shape[0]
         d = jnp.stack([self.fpso, self.shuttle])[:n]
-        nu_r = nu - jax.vmap(
-            lambda e: jnp.concatenate([rot(e[2]).T @ vc, jnp.zeros(1)])
-        )(eta)
+        nu_r = kin.nu - jax.vmap(
+            lambda e, vc: jnp.concatenate([rot(e[2]).T @ vc, jnp.zeros(1)])
+        )(kin.eta, kin.current)
         return -d * nu_r
 
 
@@ -547,8 +553,8 @@ class ConstantThrust(AbstractActuator):
         check_positive("X_max", self.X_max, "N")
         check_positive("N_max", self.N_max, "N m")
 
-    def command(self, t, y, model, effects):
-        del t, y, model, effects
+    def command(self, t, y, model, effects, env):
+        del t, y, model, effects, env
         return jnp.stack([-self.F_ast, self.N])
 
 
@@ -622,13 +628,18 @@ def hull_clearance(model, eta):
 # Models
 
 
-def current_velocity(effects):
-    """Current velocity in earth axes (m/s); zero without a current."""
-    vc = jnp.zeros(2)
-    for e in effects:
-        if isinstance(e, ShortWingCurrent):
-            vc = vc + e.velocity()
-    return vc
+def current_at(t, eta, env):
+    """Water velocity (earth axes, m/s) at each vessel `(n, 2)`, at the surface;
+    zero in still water."""
+    surface = jnp.concatenate([eta[:, :2], jnp.zeros_like(eta[:, :1])], axis=1)
+    return env.water_velocity(t, surface)[:, :2]
+
+
+def vessel_kinematics(model, t, y, env) -> VesselKinematics:
+    """The `VesselKinematics` of state `y` of `model` in `env`."""
+    s = y.reshape(model.n_vessels, 6)
+    eta, nu = s[:, :3], s[:, 3:]
+    return VesselKinematics(eta, nu, current_at(t, eta, env), model)
 
 
 def _actuator(effects):
@@ -638,28 +649,25 @@ def _actuator(effects):
     return acts[0] if acts else None
 
 
-def vessel_loads(model, t, y, effects):
+def vessel_loads(model, t, y, effects, env):
     """Sum of the body-axis loads of the scene's load effects (actuator excluded),
     shape `(n_vessels, 3)` (N, N, N m)."""
-    n = model.n_vessels
-    s = y.reshape(n, 6)
-    eta, nu = s[:, :3], s[:, 3:]
-    vc = current_velocity(effects)
-    tau = jnp.zeros((n, 3), y.dtype)
+    kin = vessel_kinematics(model, t, y, env)
+    tau = jnp.zeros((model.n_vessels, 3), y.dtype)
     for e in effects:
         if isinstance(e, AbstractVesselLoad):
-            tau = tau + e.loads(t, model, eta, nu, vc)
+            tau = tau + e.forces(t, kin, env)
     return tau
 
 
-def _rhs(model, t, y, effects, u, extra=None):
+def _rhs(model, t, y, effects, env, u, extra=None):
     """dX/dt with the shuttle input `u` = (X_ctl, N_ctl) (None: no actuator) and
     `extra` body-axis loads `(n_vessels, 3)` (None: none)."""
     n = model.n_vessels
     s = y.reshape(n, 6)
     eta, nu = s[:, :3], s[:, 3:]
-    vc = current_velocity(effects)
-    tau = vessel_loads(model, t, y, effects)
+    vc = current_at(t, eta, env)
+    tau = vessel_loads(model, t, y, effects, env)
     if extra is not None:
         tau = tau + extra
     if u is not None:
@@ -667,7 +675,7 @@ def _rhs(model, t, y, effects, u, extra=None):
         tau = tau.at[-1, 0].add(u[0]).at[-1, 2].add(u[1])
     h = model.hulls()
 
-    def one(h, eta, nu, tau):
+    def one(h, eta, nu, tau, vc):
         psi = eta[2]
         u_, v_, r = nu
         uc, vcb = rot(psi).T @ vc
@@ -681,7 +689,7 @@ def _rhs(model, t, y, effects, u, extra=None):
             [u_ * c - v_ * s_, u_ * s_ + v_ * c, r, du_r + r * vcb, dv_r - r * uc, dr]
         )
 
-    return jax.vmap(one)(h, eta, nu, tau).reshape(-1)
+    return jax.vmap(one)(h, eta, nu, tau, vc).reshape(-1)
 
 
 def _check_point(name, x, L):
@@ -714,6 +722,7 @@ class Tandem(AbstractModel):
     x_h2: Float[Array, ""] = _param(125.0)
     n_vessels: ClassVar[int] = 2
     projects: ClassVar[bool] = False
+    accepts: ClassVar[tuple[type, ...]] = (AbstractVesselLoad, AbstractActuator)
 
     def __check_init__(self):
         if not isinstance(self.fpso, Hull) or not isinstance(self.shuttle, Hull):
@@ -731,19 +740,19 @@ class Tandem(AbstractModel):
     def project(self, y):
         return y
 
-    def vector_field(self, t, y, effects):
+    def vector_field(self, t, y, effects, env):
         act = _actuator(effects)
         u = None
         if act is not None:
-            u = saturated_command(act, t, y, self, effects)
-        return _rhs(self, t, y, effects, u)
+            u = saturated_command(act, t, y, self, effects, env)
+        return _rhs(self, t, y, effects, env, u)
 
-    def vector_field_with_input(self, t, y, effects, u):
+    def vector_field_with_input(self, t, y, effects, env, u):
         """dX/dt with the shuttle input `u` = (X_ctl, N_ctl) in place of the scene's
         actuator (used by the controllers)."""
-        return _rhs(self, t, y, effects, u)
+        return _rhs(self, t, y, effects, env, u)
 
-    def observables(self, t, y, effects):
+    def observables(self, t, y, effects, env):
         """Headings (wrapped), span and tension of the hawser, hull clearance,
         actuator output, hull positions."""
         s = y.reshape(2, 6)
@@ -756,7 +765,7 @@ class Tandem(AbstractModel):
         tension = hawsers[0].tension(self, eta, nu) if hawsers else jnp.zeros(())
         act = _actuator(effects)
         if act is not None:
-            ctl = saturated_command(act, t, y, self, effects)
+            ctl = saturated_command(act, t, y, self, effects, env)
         else:
             ctl = jnp.zeros(2)
         psi_L = jnp.arctan2(D[1], D[0])
@@ -772,9 +781,9 @@ class Tandem(AbstractModel):
         }
 
 
-def saturated_command(act, t, y, model, effects):
+def saturated_command(act, t, y, model, effects, env):
     """The actuator's command saturated smoothly at its limits."""
-    u = act.command(t, y, model, effects)
+    u = act.command(t, y, model, effects, env)
     return jnp.stack([smooth_clip(u[0], act.X_max), smooth_clip(u[1], act.N_max)])
 
 
@@ -788,6 +797,7 @@ class MooredFPSO(AbstractModel):
     x_t: Float[Array, ""] = _param(128.0)
     n_vessels: ClassVar[int] = 1
     projects: ClassVar[bool] = False
+    accepts: ClassVar[tuple[type, ...]] = (AbstractVesselLoad,)
 
     def __check_init__(self):
         if not isinstance(self.fpso, Hull):
@@ -803,13 +813,11 @@ class MooredFPSO(AbstractModel):
     def project(self, y):
         return y
 
-    def vector_field(self, t, y, effects):
-        if _actuator(effects) is not None:
-            raise ValueError("an actuator acts on the shuttle; MooredFPSO has none.")
-        return _rhs(self, t, y, effects, None)
+    def vector_field(self, t, y, effects, env):
+        return _rhs(self, t, y, effects, env, None)
 
-    def observables(self, t, y, effects):
-        del t, effects
+    def observables(self, t, y, effects, env):
+        del t, effects, env
         P, _ = point_kinematics(y[:3], y[3:], self.x_t)
         return {
             "positions": y[None, :2],
