@@ -32,6 +32,7 @@ class SceneRunner:
     long_run: Callable[[argparse.Namespace], bool]  # show a progress meter?
     figure: Callable | None = None  # (traj, path, title) -> path; default: pendulum
     solver: str = "kvaerno5"  # default solver of the scene
+    animate: Callable | None = None  # (traj, path, frames, title) -> path; pendulum
 
 
 # ---------------------------------------------------------------------------
@@ -160,6 +161,12 @@ def _tether_figure(traj, path, title=""):
     return tether_plot.summary_figure(traj, path, title=title)
 
 
+def _tether_animate(traj, path, frames, title=""):
+    from ..tether import plot as tether_plot
+
+    return tether_plot.animate(traj, path, frames=frames, title=title)
+
+
 for _name, _fn, _help in (
     ("tether-fixed", "tether_fixed", "Blintsov 2017 tether, fixed length (Fig 5)"),
     ("tether-winch", "tether_winch", "Blintsov 2017 tether, pay-out/haul-in (Fig 6)"),
@@ -171,6 +178,7 @@ for _name, _fn, _help in (
         parameters=_tether_parameters,
         long_run=lambda a: True,
         figure=_tether_figure,
+        animate=_tether_animate,
         solver="dopri5",  # the paper's integrator; ACEAM is not stiff
     )
 
@@ -198,6 +206,16 @@ def _common_arguments(p: argparse.ArgumentParser, solver: str = "kvaerno5") -> N
         help="skip the second (compiled) call that times the run without compiling",
     )
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
+    _animation_arguments(p)
+
+
+def _animation_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--animate", action="store_true", help="also write the run as a GIF animation"
+    )
+    p.add_argument(
+        "--frames", type=int, default=60, help="frames of the animation (default 60)"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -230,6 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
             help="massless hawser (spec) or a line with mass and drag "
             "(tandem-fishtail, tandem-controlled)",
         )
+        _animation_arguments(sp)
     return parser
 
 
@@ -308,6 +327,13 @@ def _run_scene(args: argparse.Namespace) -> int:
         + f"  [{args.solver}, {traj.status}]"
     )
     (runner.figure or plot.summary_figure)(traj, png, title=title)
+    gif = None
+    if args.animate:
+        gif = os.path.join(args.out, stem + ".gif")
+        if runner.animate is None:
+            plot.animate(traj, gif, frames=args.frames, title=title)
+        else:
+            runner.animate(traj, gif, args.frames, title=title)
     np.savez(
         npz,
         ts=np.asarray(traj.ts),
@@ -374,6 +400,8 @@ def _run_scene(args: argparse.Namespace) -> int:
     )
     lines.append(f"wrote {png}")
     lines.append(f"wrote {npz}")
+    if gif is not None:
+        lines.append(f"wrote {gif}")
     print("\n".join(lines))
     return 0 if traj.ok else 1
 
@@ -387,10 +415,20 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "run":
+        # The command only writes files: matplotlib's file backend, whatever the
+        # machine has for a display.
+        import matplotlib
+
+        matplotlib.use("Agg")
+        if args.frames < 2:
+            print(f"error: --frames must be an integer >= 2; got {args.frames}.",
+                  file=sys.stderr)  # fmt: skip
+            return 2
         from .tandem import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:
-            return run_tanker(args.scene, args.out, args.quick, args.hawser)
+            frames = args.frames if args.animate else 0
+            return run_tanker(args.scene, args.out, args.quick, args.hawser, frames)
         return _run_scene(args)
     parser.error(f"unknown command {args.command!r}")  # pragma: no cover
     return 2  # pragma: no cover

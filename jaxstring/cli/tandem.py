@@ -222,7 +222,18 @@ def _equilibria(out_dir, quick):
     return lines, ok
 
 
-def _fishtail(out_dir, quick, hawser="massless"):
+def _animate(traj, scene, out_dir, stem, frames, title):
+    """Write the run as `<out_dir>/<stem>.gif` when `frames` > 0; the line to print."""
+    if not frames:
+        return []
+    from ..tandem import plot as tp
+
+    path = os.path.join(out_dir, stem + ".gif")
+    tp.animate(traj, _tandem(scene.model), path, frames=frames, title=title)
+    return [f"  wrote {path}"]
+
+
+def _fishtail(out_dir, quick, hawser="massless", frames=0):
     from ..tandem import plot as tp
     from ..tandem.analysis import measure_limit_cycle
     from ..tandem.scenes import tandem_fishtail
@@ -255,6 +266,7 @@ def _fishtail(out_dir, quick, hawser="massless"):
     }
     for k, s in spec.items():
         lines.append(f"  {k:<20} {m[k]:12.4g}   [spec {s}]")
+    lines += _animate(traj, sc, out_dir, "tandem_fishtail", frames, "S3a fishtailing")
     _write_csv(
         os.path.join(out_dir, "tandem_fishtail.csv"), list(m), [tuple(m.values())]
     )
@@ -326,7 +338,7 @@ def _hopf(out_dir, quick):
     return lines, abs(F_star - 43e3) <= 4.3e3
 
 
-def _controlled(out_dir, quick, hawser="massless"):
+def _controlled(out_dir, quick, hawser="massless", frames=0):
     from ..tandem import plot as tp
     from ..tandem.analysis import controlled_metrics
     from ..tandem.scenes import ENVIRONMENTS, tandem_controlled
@@ -379,6 +391,8 @@ def _controlled(out_dir, quick, hawser="massless"):
             f"[{_solver_of(sc)[0]}, {traj.status}]",
             d_ref=float(ctl.d_ref),
         )
+        stem = f"tandem_controlled_{env}"
+        lines += _animate(traj, sc, out_dir, stem, frames, f"S4 law B, {env}")
     lines.append("  [spec: final psi1 0 / 44.6 / 62.5 deg; X_end -270 to -390 kN]")
     _write_csv(
         os.path.join(out_dir, "tandem_controlled.csv"),
@@ -409,11 +423,15 @@ RUNNERS = {
 }
 
 
-def run_tanker(name: str, out_dir: str, quick: bool, hawser: str = "massless") -> int:
+def run_tanker(
+    name: str, out_dir: str, quick: bool, hawser: str = "massless", frames: int = 0
+) -> int:
     """Run the study of one tandem scene (S0-S4), print a one-screen summary and
     write figures and a CSV into `out_dir`. `hawser`: "massless" (the spec's) or
-    "line" (mass and drag; the fishtail and controlled scenes). Returns 0 when the
-    spec checks pass, 1 when one fails, 2 on an unknown name or option."""
+    "line" (mass and drag; the fishtail and controlled scenes). `frames` > 0 also
+    writes GIF animations of the runs with that many frames (the fishtail and
+    controlled scenes). Returns 0 when the spec checks pass, 1 when one fails, 2 on
+    an unknown name or option."""
     import sys
 
     if name not in RUNNERS:
@@ -431,10 +449,17 @@ def run_tanker(name: str, out_dir: str, quick: bool, hawser: str = "massless") -
             file=sys.stderr,
         )
         return 2
+    if frames and name not in LINE_SCENES:
+        print(
+            f"error: --animate is available for {', '.join(LINE_SCENES)}; "
+            f"not for {name}",
+            file=sys.stderr,
+        )
+        return 2
     os.makedirs(out_dir, exist_ok=True)
     start = time.perf_counter()
     if name in LINE_SCENES:
-        lines, ok = RUNNERS[name](out_dir, quick, hawser)
+        lines, ok = RUNNERS[name](out_dir, quick, hawser, frames)
     else:
         lines, ok = RUNNERS[name](out_dir, quick)
     lines.insert(0, f"jaxstring run {name}{' (quick)' if quick else ''}")

@@ -1,16 +1,13 @@
-"""Figures of a Trajectory (matplotlib, Agg backend).
+"""Figures and animations of a string-pendulum Trajectory (matplotlib).
 
-Not imported by the core modules: ``import jaxstring.plot`` selects matplotlib's
-non-interactive Agg backend so figures can be written to files anywhere.
+Not imported by the core modules, and it leaves matplotlib's backend as the user set
+it (the `jaxstring` command selects the file-only Agg backend itself).
 """
-
-import matplotlib
-
-
-matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
+
+from .._animate import frame_indices, write_gif
 
 
 def _valid_rows(traj) -> int:
@@ -114,3 +111,36 @@ def summary_figure(traj, path, title: str = ""):
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def animation_frames(traj, frames: int = 60):
+    """(times, node positions `(F, k + 1, dim)`) of the animation's frames: at most
+    `frames` saved states, evenly spaced over the valid rows."""
+    idx = frame_indices(traj.ts, _valid_rows(traj), frames)
+    return np.asarray(traj.ts)[idx], np.asarray(traj.positions)[idx]
+
+
+def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
+    """Write the string's motion as a GIF: the string through its nodes, the end mass
+    as a dot, the fixed pivot, equal axes, the time in a corner. Returns the path."""
+    ts, pos = animation_frames(traj, frames)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    reach = max(float(np.nanmax(np.abs(pos[..., :2]))), 1e-9) * 1.1
+    ax.set_xlim(-reach, reach)
+    ax.set_ylim(-reach, reach)
+    ax.set_aspect("equal")
+    ax.plot(0.0, 0.0, "k^", ms=8)
+    (line,) = ax.plot([], [], color="0.3", lw=1.2)
+    (mass,) = ax.plot([], [], "o", color="tab:red", ms=7)
+    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
+    ax.set_xlabel("x, m")
+    ax.set_ylabel("y, m")
+    if title:
+        ax.set_title(title, fontsize=9)
+
+    def draw(i):
+        line.set_data(pos[i, :, 0], pos[i, :, 1])
+        mass.set_data(pos[i, -1:, 0], pos[i, -1:, 1])
+        label.set_text(f"t = {ts[i]:.3f} s")
+
+    return write_gif(fig, draw, len(ts), path, fps)

@@ -1,17 +1,15 @@
-"""Figures of the FPSO + shuttle tandem (matplotlib, Agg backend).
+"""Figures and animations of the FPSO + shuttle tandem (matplotlib).
 
-Not imported by the core modules. Earth frame: x north, y east; plots put east
-to the right and north up.
+Not imported by the core modules, and it leaves matplotlib's backend as the user set
+it (the `jaxstring` command selects the file-only Agg backend itself). Earth frame: x
+north, y east; plots put east to the right and north up.
 """
-
-import matplotlib
-
-
-matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Polygon
+
+from .._animate import frame_indices, write_gif
 
 
 def hull_outline(x, y, psi, L, B):
@@ -183,3 +181,43 @@ def sweep_figure(xs, eigs, path, xlabel, title="", marks=None):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def animation_frames(traj, frames: int = 60):
+    """(times, vessel states `(F, n, 6)`, fairleads `(F, 2, 2)`) of the animation's
+    frames: at most `frames` saved states, evenly spaced over the valid rows."""
+    idx = frame_indices(traj.ts, _valid(traj), frames)
+    ys = np.asarray(traj.ys)[idx]
+    n = np.asarray(traj.positions).shape[1]
+    fairleads = traj.obs.get("fairleads")
+    fairleads = None if fairleads is None else np.asarray(fairleads)[idx]
+    return np.asarray(traj.ts)[idx], ys[:, : 6 * n].reshape(len(idx), n, 6), fairleads
+
+
+def animate(traj, model, path, frames: int = 60, fps: int = 20, title: str = ""):
+    """Write the vessels' motion seen from above as a GIF: hulls, the hawser between
+    the fairleads, the time in a corner. `model`: the `Tandem` or `MooredFPSO` (hull
+    particulars).
+    Returns the path."""
+    ts, states, fairleads = animation_frames(traj, frames)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    east, north = states[..., 1], states[..., 0]
+    reach = 0.6 * float(model.fpso.L)
+    ax.set_xlim(float(east.min()) - reach, float(east.max()) + reach)
+    ax.set_ylim(float(north.min()) - reach, float(north.max()) + reach)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east, m")
+    ax.set_ylabel("north, m")
+    if title:
+        ax.set_title(title, fontsize=9)
+
+    def draw(i):
+        for patch in list(ax.patches) + list(ax.lines) + list(ax.texts):
+            patch.remove()
+        draw_hulls(ax, model, states[i].reshape(-1))
+        if fairleads is not None:
+            f = fairleads[i]
+            ax.plot(f[:, 1], f[:, 0], color="k", lw=1.0)
+        ax.text(0.02, 0.96, f"t = {ts[i]:.0f} s", transform=ax.transAxes, va="top")
+
+    return write_gif(fig, draw, len(ts), path, fps)

@@ -1,7 +1,7 @@
-"""Figures of a tether Trajectory, like Blintsov (2017) Figs 5-6 (matplotlib, Agg).
+"""Figures of a tether Trajectory, like Blintsov (2017) Figs 5-6, and animations.
 
-Not imported by the core modules: ``import jaxstring.tether_plot`` selects matplotlib's
-non-interactive Agg backend so figures can be written to files anywhere.
+Not imported by the core modules, and it leaves matplotlib's backend as the user set
+it (the `jaxstring` command selects the file-only Agg backend itself).
 
 Panels: (a) cable configurations at chosen times (x-z plane: x north, z up), (b) the
 length error (L_r - sum of link lengths)/L_r in percent (and L_r when it changes),
@@ -9,13 +9,10 @@ length error (L_r - sum of link lengths)/L_r in percent (and L_r when it changes
 the tether on the mounts, N).
 """
 
-import matplotlib
-
-
-matplotlib.use("Agg")
-
 import matplotlib.pyplot as plt
 import numpy as np
+
+from .._animate import frame_indices, write_gif
 
 
 PAPER_TIMES = (0.0, 10.0, 22.5, 35.0, 45.0, 57.5, 70.0)  # Fig 5a: t0..t6
@@ -107,3 +104,38 @@ def summary_figure(traj, path, title: str = "", times=PAPER_TIMES):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def animation_frames(traj, frames: int = 60):
+    """(times, cable points `(F, N + 2, 3)`: mounts and elements) of the animation's
+    frames: at most `frames` saved states, evenly spaced over the valid rows."""
+    idx = frame_indices(traj.ts, _valid(traj), frames)
+    return np.asarray(traj.ts)[idx], np.asarray(traj.nodes)[idx]
+
+
+def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
+    """Write the cable's motion in the x-z plane (x north, z up) as a GIF, root mount
+    and running end marked, the time in a corner. Returns the path."""
+    ts, nodes = animation_frames(traj, frames)
+    fig, ax = plt.subplots(figsize=(6, 5))
+    x, z = nodes[..., 0], nodes[..., 2]
+    pad = 0.05 * max(float(np.ptp(x)), float(np.ptp(z)), 1.0)
+    ax.set_xlim(float(x.min()) - pad, float(x.max()) + pad)
+    ax.set_ylim(float(z.min()) - pad, float(z.max()) + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (north), m")
+    ax.set_ylabel("z (up), m")
+    (line,) = ax.plot([], [], color="tab:blue", lw=1.0)
+    (root,) = ax.plot([], [], "k^", ms=7)
+    (end,) = ax.plot([], [], "o", color="tab:red", ms=5)
+    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
+    if title:
+        ax.set_title(title, fontsize=9)
+
+    def draw(i):
+        line.set_data(x[i], z[i])
+        root.set_data(x[i, :1], z[i, :1])
+        end.set_data(x[i, -1:], z[i, -1:])
+        label.set_text(f"t = {ts[i]:.2f} s")
+
+    return write_gif(fig, draw, len(ts), path, fps)
