@@ -4,7 +4,14 @@ Each system's `plot.animate` draws its own frames; this module picks the frames 
 writes the file. Like the plot modules it is imported on demand, never by the core.
 """
 
+import textwrap
+
 import numpy as np
+
+
+def wrap_title(title: str, width: int = 56) -> str:
+    """A long title on several lines (animations are small)."""
+    return textwrap.fill(title, width)
 
 
 def frame_indices(ts, n_valid: int, frames: int) -> np.ndarray:
@@ -24,6 +31,8 @@ def write_gif(fig, draw, n_frames: int, path: str, fps: int = 20) -> str:
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
+    draw(0)
+    fig.tight_layout()
     anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
     anim.save(path, writer=PillowWriter(fps=fps))
     plt.close(fig)

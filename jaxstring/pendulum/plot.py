@@ -7,7 +7,7 @@ it (the `jaxstring` command selects the file-only Agg backend itself).
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .._animate import frame_indices, write_gif
+from .._animate import frame_indices, wrap_title, write_gif
 
 
 def _valid_rows(traj) -> int:
@@ -136,7 +136,7 @@ def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
     ax.set_xlabel("x, m")
     ax.set_ylabel("y, m")
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(wrap_title(title), fontsize=8)
 
     def draw(i):
         line.set_data(pos[i, :, 0], pos[i, :, 1])

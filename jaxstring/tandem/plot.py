@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Polygon
 
-from .._animate import frame_indices, write_gif
+from .._animate import frame_indices, wrap_title, write_gif
 
 
 def hull_outline(x, y, psi, L, B):
@@ -209,7 +209,7 @@ def animate(traj, model, path, frames: int = 60, fps: int = 20, title: str = "")
     ax.set_xlabel("east, m")
     ax.set_ylabel("north, m")
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(wrap_title(title), fontsize=8)
 
     def draw(i):
         for patch in list(ax.patches) + list(ax.lines) + list(ax.texts):

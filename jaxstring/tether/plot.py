@@ -12,7 +12,7 @@ the tether on the mounts, N).
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .._animate import frame_indices, write_gif
+from .._animate import frame_indices, wrap_title, write_gif
 
 
 PAPER_TIMES = (0.0, 10.0, 22.5, 35.0, 45.0, 57.5, 70.0)  # Fig 5a: t0..t6
@@ -130,7 +130,7 @@ def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
     (end,) = ax.plot([], [], "o", color="tab:red", ms=5)
     label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(wrap_title(title), fontsize=8)
 
     def draw(i):
         line.set_data(x[i], z[i])
