@@ -42,8 +42,12 @@ RESULTS = pathlib.Path(__file__).resolve().parent / "results"
 
 
 def results_dir() -> pathlib.Path:
-    """experiments/results/, or $JAXSTRING_RESULTS_DIR (the smoke test: a tmp dir)."""
-    return pathlib.Path(os.environ.get("JAXSTRING_RESULTS_DIR", RESULTS))
+    """Where a script writes: experiments/results/ (the latest full run of each study,
+    kept in git), experiments/results/quick/ for a `--quick` run (git-ignored), or
+    $JAXSTRING_RESULTS_DIR (the smoke test: a tmp dir)."""
+    if "JAXSTRING_RESULTS_DIR" in os.environ:
+        return pathlib.Path(os.environ["JAXSTRING_RESULTS_DIR"])
+    return RESULTS / "quick" if "--quick" in sys.argv else RESULTS
 
 
 # One run longer than this (s) is not repeated three times (2-core shared machine):
@@ -70,6 +74,9 @@ def machine_stamp() -> dict:
     """Date, processor, cores, load and versions, for every results table."""
     return {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "command": "python " + " ".join(
+            [os.path.relpath(sys.argv[0])] + sys.argv[1:]
+        ),
         "processor": platform.processor() or _cpu_model() or platform.machine(),
         "cores": os.cpu_count(),
         "load_1min": round(os.getloadavg()[0], 2),

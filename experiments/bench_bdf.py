@@ -1,4 +1,4 @@
-"""Fast stiff integration (issue 4): the variable-order BDF solver against CVODE.
+"""Fast stiff integration: the variable-order BDF solver against CVODE.
 
 Question: on the benchmark of ``bench_solvers.py`` (string pendulum in displacement
 variables, k = 40, alpha = 0.01, 2 s, rtol = atol = 1e-6, EA in {1e4, 1e6, 1e9}),

@@ -1,4 +1,4 @@
-"""Fast stiff integration (issue 4): jaxstring's implicit solvers against CVODE.
+"""Fast stiff integration: jaxstring's implicit solvers against CVODE.
 
 Question: on the string pendulum in displacement variables (k = 40, alpha = 0.01,
 2 s, rtol = atol = 1e-6), how fast are jaxstring's solvers after compilation, at
@@ -268,7 +268,7 @@ def main(
         "Jacobian at every iteration).",
         "NAME-pid: the solver with diffrax's plain PIDController "
         "(`step_control='pid'`); without the suffix the Kvaerno/implicit-Euler "
-        "solvers use NewtonLimitedController (jaxstring/_controller.py).",
+        "solvers use NewtonLimitedController (jaxstring/_solvers/step_size.py).",
     ]
     if not have_cvode:
         notes.append("CVODE not measured: scikit-sundae is not installed here.")

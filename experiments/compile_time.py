@@ -1,4 +1,4 @@
-"""Compile time of a pendulum simulate (issue 4 goal: below 10 s; no recompilation
+"""Compile time of a pendulum simulate (target: below 10 s; no recompilation
 when only parameter values change).
 
 For each solver, in a fresh process (so that nothing is cached from another solver's

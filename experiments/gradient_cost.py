@@ -1,7 +1,7 @@
 """Cost of a gradient (d loss / d (alpha, EA)) relative to the forward solve.
 
 Question: how many forward solves does one gradient cost, per formulation and
-adjoint? Goal of issue 7: at most 5x. Run: python experiments/gradient_cost.py
+adjoint? Target: at most 5x. Run: python experiments/gradient_cost.py
 [--quick]. Writes experiments/results/gradient_cost.{csv,md,png}.
 """
 
@@ -22,13 +22,14 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from _common import results_dir
 
 import jaxstring as js
 from jaxstring import _fit
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "results")
+OUT = str(results_dir())
 
 
 def loss_fn(traj, scene):

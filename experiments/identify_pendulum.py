@@ -36,13 +36,14 @@ import optax
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from _common import results_dir
 
 import jaxstring as js
 from jaxstring import _fit
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "results")
+OUT = str(results_dir())
 
 
 class Residual(eqx.Module):

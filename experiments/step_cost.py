@@ -5,7 +5,7 @@ k = 40; which part of it grows? Each piece is timed *inside* one compiled loop (
 `lax.fori_loop` of `n` calls, so no dispatch cost is counted), as the solver runs
 it: one vector field, the banded Jacobian by 12 coloured JVPs (the generic probe),
 the model's own element-wise Jacobian (`DisplacementString.vf_jacobian`, which the
-solvers use since session 10), the reduced factorisation of I - c J built from it,
+solvers use), the reduced factorisation of I - c J built from it,
 one solve with it, and one whole `BDF.step` (repeated
 from the same state: order 5, fresh Jacobian every step, as in displacement
 variables). The last column is the cost
@@ -114,7 +114,7 @@ def pieces(k, n):
 class ZeroLoad(AbstractStringLoad):
     """A load the string does not know and that adds nothing: under it the model
     gives no Jacobian of its own (`vf_jacobian` is None), so the solvers probe
-    the vector field with 12 coloured JVPs, as before session 10."""
+    the vector field with 12 coloured JVPs."""
 
     def forces(self, t, kin, env):
         return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))

@@ -1,4 +1,4 @@
-"""A 64-member parameter sweep against a Python loop of 64 simulate calls (issue 7).
+"""A 64-member parameter sweep against a Python loop of 64 simulate calls .
 
 Goal of the issue: a sweep that matches the loop to 1e-10 *and* is at least 3x
 faster. Case: string pendulum (displacement variables, k = 20, EA = 1e6 N, t1 = 2 s),
@@ -21,8 +21,8 @@ against its own loop, in the same process:
   implicit equation is converged far below 1e-10, so sweep and loop agree to
   rounding whatever the grouping.
   - `vmap, groups of 4` / `16`: one solve per member, vmapped in groups (`lax.map`).
-    Since session 5 the sweeps compile without XLA:CPU's YNNPACK fusions
-    (`jaxstring._sweep._SWEEP_COMPILER_OPTIONS`), which made groups larger than 4
+    The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`), which
+    made groups larger than 4
     slower per member; the loop's `simulate` calls keep JAX's default.
   - `lockstep, groups of g`: the members' node-major states concatenated along the
     node axis into one state of g k nodes: one banded Newton system per step for
@@ -91,8 +91,8 @@ def _loop(alphas, k, t1, kw):
 
 def failure_demo(k=6, t1=0.5, n=8, tag="", stiff_EA=1e11):
     """One member (EA = `stiff_EA`) cannot finish within `max_steps`; the others
-    can. (EA = 1e9 N no longer fails since the stage Newton's Jacobian refresh of
-    session 4 cut its step count under 2x the others'.)"""
+    can. (EA = 1e9 N does not fail: the stage Newton's Jacobian refresh keeps its
+    step count under 2x the others'.)"""
     kw = dict(solver="kvaerno3", rtol=1e-6, atol=1e-6, n_save=26)
     alphas = np.linspace(0.005, 0.05, n)
     EAs = np.full(n, 1e4)

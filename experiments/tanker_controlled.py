@@ -22,6 +22,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import results_dir
 
 import jaxstring as js
 from jaxstring import tanker_plot as tp
@@ -31,7 +32,7 @@ from jaxstring.tandem.vessels import fpso_hull, shuttle_hull
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.environ.get("JAXSTRING_RESULTS_DIR", os.path.join(HERE, "results"))
+OUT = str(results_dir())
 KEYS = (
     "span_error",
     "heading_error",

@@ -28,6 +28,7 @@ import argparse
 import time
 
 import numpy as np
+from _common import results_dir
 
 import jaxstring  # noqa: F401
 from jaxstring import tanker_plot as tp
@@ -37,7 +38,7 @@ from jaxstring.tandem.scenes import tandem_equilibria
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.environ.get("JAXSTRING_RESULTS_DIR", os.path.join(HERE, "results"))
+OUT = str(results_dir())
 
 
 def _hybr_cell(scene, factor=1.0):
@@ -46,7 +47,7 @@ def _hybr_cell(scene, factor=1.0):
     import jax.numpy as jnp
     import scipy.optimize as so
 
-    from jaxstring import _tanker_analysis as ta
+    from jaxstring.tandem import analysis as ta
 
     f = jax.jit(lambda q: ta.residual(q, scene))
     fj = jax.jit(jax.jacfwd(lambda q: ta.residual(q, scene)))

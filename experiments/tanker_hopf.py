@@ -21,6 +21,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import results_dir
 
 import jaxstring as js
 from jaxstring import tanker_plot as tp
@@ -29,7 +30,7 @@ from jaxstring.tandem.scenes import tandem_hopf
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.environ.get("JAXSTRING_RESULTS_DIR", os.path.join(HERE, "results"))
+OUT = str(results_dir())
 SPEC = {40e3: (2074, 7.8), 35e3: (2345, 11.5), 20e3: (3065, 15.3), 0.0: (3400, 18.0)}
 
 

@@ -32,6 +32,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import results_dir
 
 import jaxstring as js
 from jaxstring.tandem.analysis import measure_limit_cycle
@@ -40,7 +41,7 @@ from jaxstring.tandem.scenes import tandem_fishtail
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.environ.get("JAXSTRING_RESULTS_DIR", os.path.join(HERE, "results"))
+OUT = str(results_dir())
 LIGHT = dict(mass_per_length=0.01, gravity=False, c_n=0.0, c_t=0.0)
 
 

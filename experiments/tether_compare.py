@@ -28,6 +28,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import results_dir
 
 import jaxstring as js
 import jaxstring.tether.plot as tplot
@@ -38,7 +39,7 @@ from jaxstring.tether.models import AceamTether, ExactTether, FixedEnd
 from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 
-OUT = os.path.join(os.path.dirname(__file__), "results")
+OUT = str(results_dir())
 TS = jnp.concatenate([jnp.arange(0.025, 70.0, 0.05), jnp.array([70.0])])
 K_ACEAM = 1e4
 

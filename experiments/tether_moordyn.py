@@ -1,4 +1,4 @@
-"""Blintsov's (2017) tether in MoorDyn and in jaxstring, side by side (issue 5).
+"""Blintsov's (2017) tether in MoorDyn and in jaxstring, side by side.
 
 Question: on the paper's fixed-length scenario (``tether_fixed``: 100 m cable,
 N = 101, d = 10 mm, rho = 1024 kg/m^3, neutral buoyancy, c_n = 1, c_t = 0.1, uniform

@@ -220,7 +220,7 @@ def test_bad_arguments_raise():
 
 
 # ---------------------------------------------------------------------------
-# Stability guard: MoorDyn's test-suite pendulum (issue 4)
+# Stability guard: MoorDyn's test-suite pendulum
 # ---------------------------------------------------------------------------
 
 

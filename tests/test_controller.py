@@ -1,5 +1,6 @@
-"""Step-size control after failed stage Newton iterations (issue 4: Kvaerno5
-rejected about half its steps at EA >= 1e5; jaxstring/_controller.py)."""
+"""Step-size control after failed stage Newton iterations (with diffrax's plain PID
+controller Kvaerno5 rejected about half its steps at EA >= 1e5;
+jaxstring/_solvers/step_size.py)."""
 
 import functools
 

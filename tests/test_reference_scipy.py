@@ -45,7 +45,7 @@ N_SAVE = 21
 M_TOTAL = MU * L + M_S  # kg, string + end mass
 ENERGY_SCALE = M_TOTAL * GRAV * L  # J
 
-END_MASS_TOL = 1e-6  # m (issue requirement)
+END_MASS_TOL = 1e-6  # m: the agreement required of the two codes
 TENSION_RTOL = 1e-5  # of the largest tension over the run
 ENERGY_CONSERVATION_RTOL = 1e-8  # of M_TOTAL g l, reference with alpha = 0
 ENERGY_MATCH_RTOL = 1e-6  # of M_TOTAL g l, jaxstring vs reference

@@ -1,5 +1,5 @@
 """The tandem with a real hawser (a tether chain with mass and drag between the
-fairleads, jaxstring/_tandem_line.py): the light-line limit against the massless
+fairleads, jaxstring/tandem/line.py): the light-line limit against the massless
 hawser, the static shape against the point-load string formula, and input checks."""
 
 import functools
