@@ -1,7 +1,7 @@
-"""Animations of a run as GIFs, written with matplotlib's Pillow writer (no ffmpeg).
+"""Writing figures and animations (GIFs through matplotlib's Pillow writer: no ffmpeg).
 
 Each system's `plot.animate` draws its own frames; this module picks the frames and
-writes the file. Like the plot modules it is imported on demand, never by the core.
+writes the files. Like the plot modules it is imported on demand, never by the core.
 """
 
 import textwrap
@@ -23,6 +23,35 @@ def frame_indices(ts, n_valid: int, frames: int) -> np.ndarray:
         return np.zeros((0,), dtype=int)
     targets = np.linspace(ts[0], ts[-1], min(frames, ts.size))
     return np.unique(np.abs(ts[None, :] - targets[:, None]).argmin(axis=1))
+
+
+def save_figure(fig, path, title: str = "", dpi: int = 110, tight: bool = True):
+    """Give `fig` its title, write it to `path` and close it; returns the path."""
+    import matplotlib.pyplot as plt
+
+    if title:
+        fig.suptitle(title, fontsize=10)
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def canvas(xlim, ylim, xlabel: str, ylabel: str, title: str = "", size=(5, 5)):
+    """A figure with one equal-aspect axes for an animation, and its time label."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=size)
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.set_aspect("equal")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(wrap_title(title), fontsize=8)
+    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
+    return fig, ax, label
 
 
 def write_gif(fig, draw, n_frames: int, path: str, fps: int = 20) -> str:

@@ -7,7 +7,7 @@ it (the `jaxstring` command selects the file-only Agg backend itself).
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .._animate import frame_indices, wrap_title, write_gif
+from .._animate import canvas, frame_indices, save_figure, write_gif
 
 
 def _valid_rows(traj) -> int:
@@ -106,11 +106,7 @@ def summary_figure(traj, path, title: str = ""):
     ax_e = fig.add_subplot(grid[1, 1], sharex=ax_t)
     snapshots(traj, ax=ax_s)
     time_series(traj, (ax_t, ax_e))
-    if title:
-        fig.suptitle(title)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, title, dpi=120, tight=False)
 
 
 def animation_frames(traj, frames: int = 60):
@@ -124,19 +120,12 @@ def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
     """Write the string's motion as a GIF: the string through its nodes, the end mass
     as a dot, the fixed pivot, equal axes, the time in a corner. Returns the path."""
     ts, pos = animation_frames(traj, frames)
-    fig, ax = plt.subplots(figsize=(5, 5))
     reach = max(float(np.nanmax(np.abs(pos[..., :2]))), 1e-9) * 1.1
-    ax.set_xlim(-reach, reach)
-    ax.set_ylim(-reach, reach)
-    ax.set_aspect("equal")
+    lim = (-reach, reach)
+    fig, ax, label = canvas(lim, lim, "x, m", "y, m", title)
     ax.plot(0.0, 0.0, "k^", ms=8)
     (line,) = ax.plot([], [], color="0.3", lw=1.2)
     (mass,) = ax.plot([], [], "o", color="tab:red", ms=7)
-    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
-    ax.set_xlabel("x, m")
-    ax.set_ylabel("y, m")
-    if title:
-        ax.set_title(wrap_title(title), fontsize=8)
 
     def draw(i):
         line.set_data(pos[i, :, 0], pos[i, :, 1])

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Polygon
 
-from .._animate import frame_indices, wrap_title, write_gif
+from .._animate import canvas, frame_indices, save_figure, write_gif
 
 
 def hull_outline(x, y, psi, L, B):
@@ -95,11 +95,7 @@ def tandem_figure(traj, model, path, title="", d_ref=None):
     trajectories_from_above(traj, model, ax=ax0)
     axes = [fig.add_subplot(4, 2, 2 * k + 2) for k in range(4)]
     span_and_tension(traj, axes=axes, d_ref=d_ref)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, title)
 
 
 KIND_STYLE = {
@@ -156,11 +152,7 @@ def equilibrium_map(cells, results, path, title="Tandem equilibria"):
     ax1.set_ylim(-185, 185)
     ax1.legend(fontsize=8)
     ax1.set_title("all equilibria (faint: hulls overlap)", fontsize=9)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, title)
 
 
 def sweep_figure(xs, eigs, path, xlabel, title="", marks=None):
@@ -177,10 +169,7 @@ def sweep_figure(xs, eigs, path, xlabel, title="", marks=None):
     ax.set_ylabel("leading eigenvalue, 1/s")
     ax.legend(fontsize=8)
     ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def animation_frames(traj, frames: int = 60):
@@ -197,27 +186,21 @@ def animation_frames(traj, frames: int = 60):
 def animate(traj, model, path, frames: int = 60, fps: int = 20, title: str = ""):
     """Write the vessels' motion seen from above as a GIF: hulls, the hawser between
     the fairleads, the time in a corner. `model`: the `Tandem` or `MooredFPSO` (hull
-    particulars).
-    Returns the path."""
+    particulars). Returns the path."""
     ts, states, fairleads = animation_frames(traj, frames)
-    fig, ax = plt.subplots(figsize=(6, 6))
     east, north = states[..., 1], states[..., 0]
     reach = 0.6 * float(model.fpso.L)
-    ax.set_xlim(float(east.min()) - reach, float(east.max()) + reach)
-    ax.set_ylim(float(north.min()) - reach, float(north.max()) + reach)
-    ax.set_aspect("equal")
-    ax.set_xlabel("east, m")
-    ax.set_ylabel("north, m")
-    if title:
-        ax.set_title(wrap_title(title), fontsize=8)
+    elim = (float(east.min()) - reach, float(east.max()) + reach)
+    nlim = (float(north.min()) - reach, float(north.max()) + reach)
+    fig, ax, label = canvas(elim, nlim, "east, m", "north, m", title, (6, 6))
 
     def draw(i):
-        for patch in list(ax.patches) + list(ax.lines) + list(ax.texts):
-            patch.remove()
+        for artist in list(ax.patches) + list(ax.lines):
+            artist.remove()
         draw_hulls(ax, model, states[i].reshape(-1))
         if fairleads is not None:
             f = fairleads[i]
             ax.plot(f[:, 1], f[:, 0], color="k", lw=1.0)
-        ax.text(0.02, 0.96, f"t = {ts[i]:.0f} s", transform=ax.transAxes, va="top")
+        label.set_text(f"t = {ts[i]:.0f} s")
 
     return write_gif(fig, draw, len(ts), path, fps)

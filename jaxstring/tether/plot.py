@@ -12,7 +12,7 @@ the tether on the mounts, N).
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .._animate import frame_indices, wrap_title, write_gif
+from .._animate import canvas, frame_indices, save_figure, write_gif
 
 
 PAPER_TIMES = (0.0, 10.0, 22.5, 35.0, 45.0, 57.5, 70.0)  # Fig 5a: t0..t6
@@ -99,11 +99,7 @@ def summary_figure(traj, path, title: str = "", times=PAPER_TIMES):
     length_error(traj, ax_b)
     end_force(traj, fig.add_subplot(grid[1, 1], sharex=ax_b), "root")
     end_force(traj, fig.add_subplot(grid[2, 1], sharex=ax_b), "fast")
-    if title:
-        fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, title, tight=False)
 
 
 def animation_frames(traj, frames: int = 60):
@@ -117,20 +113,14 @@ def animate(traj, path, frames: int = 60, fps: int = 20, title: str = ""):
     """Write the cable's motion in the x-z plane (x north, z up) as a GIF, root mount
     and running end marked, the time in a corner. Returns the path."""
     ts, nodes = animation_frames(traj, frames)
-    fig, ax = plt.subplots(figsize=(6, 5))
     x, z = nodes[..., 0], nodes[..., 2]
     pad = 0.05 * max(float(np.ptp(x)), float(np.ptp(z)), 1.0)
-    ax.set_xlim(float(x.min()) - pad, float(x.max()) + pad)
-    ax.set_ylim(float(z.min()) - pad, float(z.max()) + pad)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (north), m")
-    ax.set_ylabel("z (up), m")
+    xlim = (float(x.min()) - pad, float(x.max()) + pad)
+    zlim = (float(z.min()) - pad, float(z.max()) + pad)
+    fig, ax, label = canvas(xlim, zlim, "x (north), m", "z (up), m", title, (6, 5))
     (line,) = ax.plot([], [], color="tab:blue", lw=1.0)
     (root,) = ax.plot([], [], "k^", ms=7)
     (end,) = ax.plot([], [], "o", color="tab:red", ms=5)
-    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top")
-    if title:
-        ax.set_title(wrap_title(title), fontsize=8)
 
     def draw(i):
         line.set_data(x[i], z[i])
