@@ -83,7 +83,7 @@ class JaxRHS:
 
         def end_mass(ys):
             def one(y):
-                obs = scene.model.observables(0.0, y.reshape(shape), scene.effects)
+                obs = scene.observables(y.reshape(shape))
                 return obs["positions"][-1]
 
             return jax.vmap(one)(ys)

@@ -79,7 +79,7 @@ def pieces(k, n):
         lambda v: s.vector_field(0.0, v), u, 1, second_order=2
     )
     # The solver's path: the model's own element-wise Jacobian (`vf_jacobian`).
-    J = sc.model.vf_jacobian(0.0, y, sc.effects)
+    J = sc.model.vf_jacobian(0.0, y, sc.effects, sc.env)
     c = 1e-4
     F = _linalg.factor(J.scale_shift(1.0, -c))
 
@@ -93,7 +93,9 @@ def pieces(k, n):
         "rhs_us": loop_us(lambda u, s: u + 1e-9 * s.vector_field(0.0, u), y, sc, n),
         "jacobian_us": loop_us(lambda u, s: u + 1e-30 * _touch(jac(u, s)), y, sc, n),
         "model_jacobian_us": loop_us(
-            lambda u, s: u + 1e-30 * _touch(s.model.vf_jacobian(0.0, u, s.effects)),
+            lambda u, s: (
+                u + 1e-30 * _touch(s.model.vf_jacobian(0.0, u, s.effects, s.env))
+            ),
             y,
             sc,
             n,

@@ -7,7 +7,7 @@ the factorisation and one solve -- (a) with jaxlib 0.10's YNNPACK library fusion
 (XLA's default) and with them off (what `jaxstring._jit.cpu_jit` compiles
 simulate, fit and sweep with), and
 (b) for the full 4 x 4-block cyclic reduction against the reduced 2 x 2-block
-system on the velocities (`jaxstring._linalg.banded.SecondOrderFactor`)? Each XLA setting
+system on the velocities (`jaxstring._linalg.SecondOrderFactor`)? Each XLA setting
 runs in its own process, set by XLA_FLAGS (read when the CPU backend starts). Times
 are the best of 5 means of 100 calls, in microseconds, after compilation.
 

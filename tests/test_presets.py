@@ -1,7 +1,7 @@
 """Accuracy presets deliver ordered accuracy on the stiff pendulum.
 
-The documented errors (jaxstring/_solvers/presets.py) were measured at k = 40; here a k = 8
-string in (eps, phi) variables, EA = 1e6, 0.5 s, against Kvaerno5 at 1e-11.
+The documented errors (jaxstring/_solvers/presets.py) were measured at k = 40; here a
+k = 8 string in (eps, phi) variables, EA = 1e6, 0.5 s, against Kvaerno5 at 1e-11.
 """
 
 import jax.numpy as jnp
