@@ -26,25 +26,14 @@ from _common import results_dir
 
 import jaxstring as js
 from jaxstring import tanker_plot as tp
-from jaxstring.tandem.analysis import controlled_metrics
+from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
 from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled, tandem_model
 from jaxstring.tandem.vessels import fpso_hull, shuttle_hull
 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = str(results_dir())
-KEYS = (
-    "span_error",
-    "heading_error",
-    "span_min",
-    "clearance_min",
-    "X_peak",
-    "N_peak",
-    "psi1_final",
-    "X_final",
-    "N_final",
-    "ok",
-)
+KEYS = CONTROLLED_METRICS
 
 
 def row(law, env, m, run_s):

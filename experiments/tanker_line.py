@@ -260,22 +260,12 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
 
 
 def controlled(quick):
-    from jaxstring.tandem.analysis import controlled_metrics
+    from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
     from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled
 
     t1 = 4000.0 if quick else 6000.0
     sfx = "_quick" if quick else ""
-    keys = [
-        "span_error",
-        "heading_error",
-        "span_min",
-        "clearance_min",
-        "X_peak",
-        "N_peak",
-        "psi1_final",
-        "X_final",
-        "ok",
-    ]
+    keys = list(CONTROLLED_METRICS)
     rows = []
     for env in ENVIRONMENTS:
         for hawser, solver, tol in (

@@ -340,7 +340,7 @@ def _hopf(out_dir, quick):
 
 def _controlled(out_dir, quick, hawser="massless", frames=0):
     from ..tandem import plot as tp
-    from ..tandem.analysis import controlled_metrics
+    from ..tandem.analysis import CONTROLLED_METRICS, controlled_metrics
     from ..tandem.scenes import ENVIRONMENTS, tandem_controlled
 
     t1 = 4000.0 if quick else 6000.0
@@ -362,26 +362,7 @@ def _controlled(out_dir, quick, hawser="massless", frames=0):
             f"{m['X_peak'] / 1e3:9.0f}  {m['N_peak']:.2e}  "
             f"{m['psi1_final']:8.2f}  {m['X_final'] / 1e3:8.0f}  {m['ok']}"
         )
-        rows.append(
-            (
-                env,
-                *[
-                    m[k]
-                    for k in (
-                        "span_error",
-                        "heading_error",
-                        "span_min",
-                        "clearance_min",
-                        "X_peak",
-                        "N_peak",
-                        "psi1_final",
-                        "X_final",
-                        "N_final",
-                    )
-                ],
-                m["ok"],
-            )
-        )
+        rows.append((env, *[m[k] for k in CONTROLLED_METRICS]))
         ok &= m["ok"]
         tp.tandem_figure(
             traj,
@@ -396,19 +377,7 @@ def _controlled(out_dir, quick, hawser="massless", frames=0):
     lines.append("  [spec: final psi1 0 / 44.6 / 62.5 deg; X_end -270 to -390 kN]")
     _write_csv(
         os.path.join(out_dir, "tandem_controlled.csv"),
-        [
-            "env",
-            "span_error",
-            "heading_error",
-            "span_min",
-            "clearance_min",
-            "X_peak",
-            "N_peak",
-            "psi1_final",
-            "X_final",
-            "N_final",
-            "ok",
-        ],
+        ["env", *CONTROLLED_METRICS],
         rows,
     )
     return lines, ok

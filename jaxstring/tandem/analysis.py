@@ -436,6 +436,21 @@ def rotate_state(y, angle):
     return y.reshape(-1)
 
 
+# The columns of a table of `controlled_metrics`, in order.
+CONTROLLED_METRICS = (
+    "span_error",
+    "heading_error",
+    "span_min",
+    "clearance_min",
+    "X_peak",
+    "N_peak",
+    "psi1_final",
+    "X_final",
+    "N_final",
+    "ok",
+)
+
+
 def controlled_metrics(traj, d_ref, X_max, N_max, t_after=3000.0):
     """S4 acceptance quantities of a controlled run.
 
