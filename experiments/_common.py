@@ -74,9 +74,7 @@ def machine_stamp() -> dict:
     """Date, processor, cores, load and versions, for every results table."""
     return {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "command": "python " + " ".join(
-            [os.path.relpath(sys.argv[0])] + sys.argv[1:]
-        ),
+        "command": "python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:]),
         "processor": platform.processor() or _cpu_model() or platform.machine(),
         "cores": os.cpu_count(),
         "load_1min": round(os.getloadavg()[0], 2),

@@ -28,9 +28,9 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import jax.numpy as jnp
 import numpy as np
-from _common import end_mass_error, fmt, timed_split, write_table
 from bench_solvers import run_cvode, run_solver
 
 import jaxstring as js
@@ -59,7 +59,7 @@ def run_scipy_bdf(scene, ts, rtol, atol, repeats):
         )
         return out["sol"]
 
-    tm, _ = timed_split(rhs.compile, go, repeats)
+    tm, _ = common.timed_split(rhs.compile, go, repeats)
     sol = out["sol"]
     row = {
         "solver": "scipy BDF (sparse JAX Jacobian)",
@@ -113,7 +113,7 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
         for r in block:
             r["EA"] = EA
             r["error_m"] = (
-                end_mass_error(r["end"], ref_end)
+                common.end_mass_error(r["end"], ref_end)
                 if r.get("end") is not None
                 else float("nan")
             )
@@ -126,10 +126,11 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
                     1e6 * r["run_s"] / max(r["steps"] + (r["rejected"] or 0), 1)
                 )
             print(
-                f"  {r['solver']:34s} ok={r.get('ok')} run={fmt(r.get('run_s'))}s "
-                f"compile={fmt(r.get('compile_s'))}s steps={r.get('steps')} "
-                f"rej={r.get('rejected')} err={fmt(r['error_m'])} "
-                f"x CVODE={fmt(r['vs_cvode'])}",
+                f"  {r['solver']:34s} ok={r.get('ok')} "
+                f"run={common.fmt(r.get('run_s'))}s "
+                f"compile={common.fmt(r.get('compile_s'))}s steps={r.get('steps')} "
+                f"rej={r.get('rejected')} err={common.fmt(r['error_m'])} "
+                f"x CVODE={common.fmt(r['vs_cvode'])}",
                 flush=True,
             )
         rows.extend(block)
@@ -163,7 +164,7 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
     ]
     if not have_cvode:
         notes.append("CVODE not measured: scikit-sundae is not installed here.")
-    write_table(
+    common.write_table(
         f"bench_bdf{tag}", rows, cols, "BDF on the stiff string pendulum", notes
     )
     return rows

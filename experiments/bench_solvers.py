@@ -34,20 +34,12 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-from _common import (
-    end_mass_error,
-    fmt,
-    new_figure,
-    savefig,
-    timed,
-    timed_split,
-    write_table,
-)
 
 import jaxstring as js
 from jaxstring import _linalg
@@ -91,7 +83,7 @@ def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
         kw["step_control"] = "pid"
     row = {"solver": name}
     try:
-        tm, traj = timed(lambda: js.simulate(scene, solver, **kw), repeats)
+        tm, traj = common.timed(lambda: js.simulate(scene, solver, **kw), repeats)
     except Exception as e:  # a solver that cannot run is a result, not a crash
         row.update(ok=False, status=f"{type(e).__name__}: {e}"[:100], end=None)
         return row
@@ -118,7 +110,7 @@ def run_cvode(scene, ts, rtol, atol, repeats):
         out["r"] = solve(rhs, "cvode-BDF", ts, rtol, atol, jac="jax-band")
         return out["r"]
 
-    tm, _ = timed_split(rhs.compile, go, repeats)
+    tm, _ = common.timed_split(rhs.compile, go, repeats)
     r = out["r"]
     row = {
         "solver": "CVODE BDF (band, JAX Jacobian)",
@@ -225,7 +217,7 @@ def main(
         for r in block_rows:
             r["EA"] = EA
             r["error_m"] = (
-                end_mass_error(r["end"], ref_end)
+                common.end_mass_error(r["end"], ref_end)
                 if r.get("end") is not None
                 else float("nan")
             )
@@ -235,10 +227,11 @@ def main(
                     1e6 * r["run_s"] / max(r["steps"] + r["rejected"], 1)
                 )
             print(
-                f"  {r['solver']:32s} ok={r.get('ok')} run={fmt(r.get('run_s'))}s "
-                f"compile={fmt(r.get('compile_s'))}s steps={r.get('steps')} "
-                f"rej={r.get('rejected')} err={fmt(r['error_m'])} "
-                f"x CVODE={fmt(r['vs_cvode'])}",
+                f"  {r['solver']:32s} ok={r.get('ok')} "
+                f"run={common.fmt(r.get('run_s'))}s "
+                f"compile={common.fmt(r.get('compile_s'))}s steps={r.get('steps')} "
+                f"rej={r.get('rejected')} err={common.fmt(r['error_m'])} "
+                f"x CVODE={common.fmt(r['vs_cvode'])}",
                 flush=True,
             )
         rows.extend(block_rows)
@@ -273,7 +266,7 @@ def main(
     if not have_cvode:
         notes.append("CVODE not measured: scikit-sundae is not installed here.")
     if table1:
-        write_table(
+        common.write_table(
             f"bench_solvers{tag}",
             rows,
             cols,
@@ -292,7 +285,8 @@ def main(
         r.update(k=kk)
         scal.append(r)
         print(
-            f"  k={kk:5d} rodas5p run={fmt(r.get('run_s'))}s steps={r.get('steps')}"
+            f"  k={kk:5d} rodas5p run={common.fmt(r.get('run_s'))}s "
+            f"steps={r.get('steps')}"
             f" rej={r.get('rejected')}",
             flush=True,
         )
@@ -300,7 +294,7 @@ def main(
             c = run_cvode(scene, ts, rtol, atol, 1 if kk > 160 else repeats)
             c.update(k=kk)
             scal.append(c)
-            print(f"  k={kk:5d} CVODE   run={fmt(c.get('run_s'))}s", flush=True)
+            print(f"  k={kk:5d} CVODE   run={common.fmt(c.get('run_s'))}s", flush=True)
     fits = {}
     for label in {r["solver"] for r in scal}:
         pts = [(r["k"], r["run_s"]) for r in scal if r["solver"] == label and r["ok"]]
@@ -309,7 +303,7 @@ def main(
             fits[label] = float(np.polyfit(np.log(kk), np.log(tt), 1)[0])
     for r in scal:
         r["exponent"] = fits.get(r["solver"])
-    write_table(
+    common.write_table(
         f"bench_solvers_scaling{tag}",
         scal,
         ["k", "solver", "ok", "run_s", "steps", "rejected", "exponent"],
@@ -323,7 +317,7 @@ def main(
 
     # Where the time goes.
     comp = [component_costs(kk) for kk in ((10, 40) if quick else (40, 160))]
-    write_table(
+    common.write_table(
         f"bench_solvers_components{tag}",
         comp,
         list(comp[0]),
@@ -331,7 +325,7 @@ def main(
         ["Measured inside a compiled fori_loop (no dispatch overhead)."],
     )
 
-    fig, ax = new_figure(2, 1, w=5.5)
+    fig, ax = common.new_figure(2, 1, w=5.5)
     for name in {r["solver"] for r in rows}:
         pts = [
             (r["EA"], r["run_s"]) for r in rows if r["solver"] == name and r.get("ok")
@@ -352,7 +346,7 @@ def main(
     ax[0, 1].set_ylabel("wall time after compile (s)")
     ax[0, 1].set_title("EA = 1e6")
     ax[0, 1].legend(fontsize=7)
-    savefig(fig, f"bench_solvers{tag}" + ("" if table1 else "_scaling"))
+    common.savefig(fig, f"bench_solvers{tag}" + ("" if table1 else "_scaling"))
     return rows, scal, comp
 
 

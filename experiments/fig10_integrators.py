@@ -24,20 +24,11 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import jax
 import jax.numpy as jnp
 import numpy as np
 import references
-from _common import (
-    end_mass_error,
-    new_figure,
-    parse_list,
-    run_jaxstring,
-    run_peer,
-    savefig,
-    solver_names,
-    write_table,
-)
 
 import jaxstring
 
@@ -171,7 +162,7 @@ def main(
     t1 = 0.2 if quick else PAPER["t1"]
     EAs = EAs or ((1e4, 1e6) if quick else EAS)
     repeats = repeats or (1 if quick else 3)
-    names = solvers or solver_names(
+    names = solvers or common.solver_names(
         "all", ["kvaerno5", "implicit_euler_fixed"] if quick else None
     )
     names = [n for n in names if n in jaxstring.SOLVERS]
@@ -201,7 +192,7 @@ def main(
                     }
                 )
                 continue
-            r = run_jaxstring(
+            r = common.run_jaxstring(
                 scene,
                 name,
                 ts,
@@ -214,7 +205,7 @@ def main(
             r.update(
                 EA=EA,
                 kind="jaxstring",
-                err_m=end_mass_error(r.pop("end"), ref) if r["ok"] else math.nan,
+                err_m=common.end_mass_error(r.pop("end"), ref) if r["ok"] else math.nan,
             )
             if not r["ok"] or r["run_s"] > budget_s:
                 dead.add(name)
@@ -235,7 +226,7 @@ def main(
                         }
                     )
                     continue
-                r = run_peer(
+                r = common.run_peer(
                     rhs,
                     peer,
                     jac,
@@ -248,7 +239,7 @@ def main(
                 r.update(
                     EA=EA,
                     kind="reference",
-                    err_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                    err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
                 )
                 if not r["ok"] or r["run_s"] > budget_s:
                     dead.add(key)
@@ -278,7 +269,7 @@ def main(
         "njev",
         "status",
     ]
-    write_table(
+    common.write_table(
         f"fig10_integrators{tag}",
         rows,
         cols,
@@ -302,7 +293,7 @@ def main(
         [r for r in peer_rows if r["EA"] == EAs[-1]],
         quick,
     )
-    write_table(
+    common.write_table(
         f"fig10_where_time_goes{tag}",
         diag,
         [
@@ -336,7 +327,7 @@ def main(
 
 
 def _plot(rows, EAs, formulation, k, tag):
-    fig, axes = new_figure(2, 1, w=5.5)
+    fig, axes = common.new_figure(2, 1, w=5.5)
     ax, ax2 = axes[0]
     names = list(dict.fromkeys(r["solver"] for r in rows))
     for name in names:
@@ -358,7 +349,7 @@ def _plot(rows, EAs, formulation, k, tag):
     ax2.set_ylabel("end-mass error vs tight reference (m)")
     ax2.set_title("accuracy of the same runs")
     ax.legend(fontsize=6, ncol=2)
-    savefig(fig, f"fig10_integrators{tag}")
+    common.savefig(fig, f"fig10_integrators{tag}")
 
 
 if __name__ == "__main__":
@@ -373,8 +364,8 @@ if __name__ == "__main__":
     main(
         quick=a.quick,
         formulation=a.formulation,
-        EAs=parse_list(a.EAs),
-        solvers=parse_list(a.solvers, str),
-        jacs=parse_list(a.jacs, str),
+        EAs=common.parse_list(a.EAs),
+        solvers=common.parse_list(a.solvers, str),
+        jacs=common.parse_list(a.jacs, str),
         repeats=a.repeats or None,
     )

@@ -21,18 +21,9 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import numpy as np
 import references
-from _common import (
-    end_mass_error,
-    new_figure,
-    parse_list,
-    run_jaxstring,
-    run_peer,
-    savefig,
-    solver_names,
-    write_table,
-)
 from fig10_integrators import tight_reference
 
 import jaxstring
@@ -60,7 +51,7 @@ def main(
     )
     EAs = EAs or ((1e4, 1e6) if quick else EAS)
     repeats = repeats or (1 if quick else 3)
-    names = solvers or (["kvaerno5"] if quick else solver_names("implicit"))
+    names = solvers or (["kvaerno5"] if quick else common.solver_names("implicit"))
     names = [n for n in names if n in jaxstring.SOLVERS and jaxstring.SOLVERS[n][1]]
     avail = references.available()
     peer = "ida" if avail["ida"] else ("cvode-BDF" if avail["cvode-BDF"] else None)
@@ -76,12 +67,14 @@ def main(
             for name in names:
                 if name in dead:
                     continue
-                r = run_jaxstring(scene, name, ts, rtol=tol, atol=tol, repeats=repeats)
+                r = common.run_jaxstring(
+                    scene, name, ts, rtol=tol, atol=tol, repeats=repeats
+                )
                 end = r.pop("end")
                 r.update(
                     formulation=form,
                     EA=EA,
-                    err_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                    err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
                 )
                 if not r["ok"] or r["run_s"] > budget_s:
                     dead.add(name)
@@ -89,14 +82,14 @@ def main(
                 print(f"{form} EA={EA:g} {name}: {r['run_s']:.3g} s", flush=True)
             if peer is not None:
                 rhs = references.JaxRHS(scene)
-                r = run_peer(
+                r = common.run_peer(
                     rhs, peer, "jax-band", ts, rtol=tol, atol=tol, repeats=repeats
                 )
                 end = r.pop("end")
                 r.update(
                     formulation=form,
                     EA=EA,
-                    err_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                    err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
                 )
                 rows.append(r)
     # Best jaxstring solver per formulation: smallest summed time over the EAs
@@ -132,7 +125,7 @@ def main(
         r["cpu_rel"] = r["run_s"] / base if r["ok"] else math.nan
         r["best"] = r["solver"] == best.get(r["formulation"])
     tag = "_quick" if quick else ""
-    write_table(
+    common.write_table(
         f"fig9_formulations{tag}",
         rows,
         [
@@ -159,7 +152,7 @@ def main(
             "run_s: median of `repeats` runs after a compile/warm-up run.",
         ],
     )
-    fig, axes = new_figure(1, 1, w=6)
+    fig, axes = common.new_figure(1, 1, w=6)
     ax = axes[0][0]
     for i, form in enumerate(formulations):
         for who, style in ((best[form], "-"), (f"{peer} [jax-band]", "--")):
@@ -183,7 +176,7 @@ def main(
     ax.set_ylabel("wall time (1 = fastest at smallest EA)")
     ax.set_title(f"Fig 9: formulations, k={k}, rtol={tol:g}")
     ax.legend(fontsize=7)
-    savefig(fig, f"fig9_formulations{tag}")
+    common.savefig(fig, f"fig9_formulations{tag}")
     return rows
 
 
@@ -197,8 +190,8 @@ if __name__ == "__main__":
     a = p.parse_args()
     main(
         quick=a.quick,
-        formulations=parse_list(a.formulations, str),
-        EAs=parse_list(a.EAs),
-        solvers=parse_list(a.solvers, str),
+        formulations=common.parse_list(a.formulations, str),
+        EAs=common.parse_list(a.EAs),
+        solvers=common.parse_list(a.solvers, str),
         repeats=a.repeats or None,
     )

@@ -36,17 +36,10 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from typing import ClassVar
 
+import _common as common
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from _common import (
-    MAX_STEPS,
-    end_mass_error,
-    new_figure,
-    run_jaxstring,
-    savefig,
-    write_table,
-)
 
 import jaxstring
 
@@ -230,7 +223,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
         rtol=1e-10,
         atol=1e-10,
         ts=ts,
-        max_steps=MAX_STEPS if quick else 1_000_000,
+        max_steps=common.MAX_STEPS if quick else 1_000_000,
     )
     ref = np.asarray(tight.end_mass)
     md_ref = md[cfls[0]]["end"] if have_md else None
@@ -243,8 +236,8 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
                 "setup_s": r["init_s"],
                 "run_s": r["run_s"],
                 "repeats": r["repeats"],
-                "err_vs_tight_m": end_mass_error(r["end"], ref),
-                "diff_vs_moordyn_m": end_mass_error(r["end"], md_ref),
+                "err_vs_tight_m": common.end_mass_error(r["end"], ref),
+                "diff_vs_moordyn_m": common.end_mass_error(r["end"], md_ref),
                 "x_end_m": r["end"][-1, 0],
             }
         )
@@ -253,7 +246,9 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
         if name not in jaxstring.SOLVERS or not jaxstring.SOLVERS[name][1]:
             continue
         for tol in tols:
-            r = run_jaxstring(scene, name, ts, rtol=tol, atol=tol, repeats=repeats)
+            r = common.run_jaxstring(
+                scene, name, ts, rtol=tol, atol=tol, repeats=repeats
+            )
             end = r.pop("end")
             rows.append(
                 {
@@ -263,8 +258,10 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
                     "run_s": r["run_s"],
                     "repeats": r["repeats"],
                     "steps": r.get("num_steps"),
-                    "err_vs_tight_m": end_mass_error(end, ref) if r["ok"] else math.nan,
-                    "diff_vs_moordyn_m": end_mass_error(end, md_ref)
+                    "err_vs_tight_m": common.end_mass_error(end, ref)
+                    if r["ok"]
+                    else math.nan,
+                    "diff_vs_moordyn_m": common.end_mass_error(end, md_ref)
                     if (r["ok"] and have_md)
                     else math.nan,
                     "x_end_m": float(end[-1, 0]) if r["ok"] else math.nan,
@@ -274,7 +271,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
             if not r["ok"] or r["run_s"] > 120.0:
                 break  # tighter tolerances would only cost more
     tag = "_quick" if quick else ""
-    write_table(
+    common.write_table(
         f"moordyn_pendulum{tag}",
         rows,
         [
@@ -303,7 +300,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
             "initial state: MoorDyn's node positions after its IC solve, at rest.",
         ],
     )
-    fig, axes = new_figure(2, 1, w=5.5)
+    fig, axes = common.new_figure(2, 1, w=5.5)
     ax, ax2 = axes[0]
     if have_md:
         for cfl, r in md.items():
@@ -320,7 +317,7 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
     ax2.set_xlabel("t (s)")
     ax2.set_ylabel("|MoorDyn - jaxstring| (m)")
     ax2.legend(fontsize=7)
-    savefig(fig, f"moordyn_pendulum{tag}")
+    common.savefig(fig, f"moordyn_pendulum{tag}")
     return rows
 
 

@@ -38,20 +38,10 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import jax
 import numpy as np
 import references
-from _common import (
-    MAX_STEPS,
-    end_mass_error,
-    new_figure,
-    parse_list,
-    run_jaxstring,
-    run_peer,
-    savefig,
-    solver_names,
-    write_table,
-)
 
 import jaxstring
 
@@ -101,7 +91,7 @@ def main(
     ks = ks or ((4, 8) if quick else KS)
     t1 = 0.2 if quick else 2.0
     repeats = repeats or (1 if quick else 3)
-    candidates = solvers or (["kvaerno5"] if quick else solver_names("implicit"))
+    candidates = solvers or (["kvaerno5"] if quick else common.solver_names("implicit"))
     candidates = [
         n for n in candidates if n in jaxstring.SOLVERS and jaxstring.SOLVERS[n][1]
     ]
@@ -128,11 +118,13 @@ def main(
         for name in list(active):
             if "[" in name:
                 p, j = name.split(" [")
-                r = run_peer(
+                r = common.run_peer(
                     rhs, p, j.rstrip("]"), ts, rtol=tol, atol=tol, repeats=repeats
                 )
             else:
-                r = run_jaxstring(scene, name, ts, rtol=tol, atol=tol, repeats=repeats)
+                r = common.run_jaxstring(
+                    scene, name, ts, rtol=tol, atol=tol, repeats=repeats
+                )
                 timed_again.append((r, scene, name))
             end = r.pop("end")
             if ref is None and r["ok"]:
@@ -140,7 +132,7 @@ def main(
             r.update(
                 k=k,
                 n_states=int(scene.y0.size),
-                diff_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                diff_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
             )
             rows.append(r)
             print(f"k={k} {name}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
@@ -160,7 +152,7 @@ def main(
                 t = time.perf_counter()
                 jax.block_until_ready(
                     jaxstring.simulate(
-                        sc, n, rtol=tol, atol=tol, ts=ts, max_steps=MAX_STEPS
+                        sc, n, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
                     ).ys
                 )
                 runs[id(r)].append(time.perf_counter() - t)
@@ -195,7 +187,7 @@ def main(
                 }
             )
     tag = ("_quick" if quick else "") + (f"_{out_name}" if out_name else "")
-    write_table(
+    common.write_table(
         f"scaling_k{tag}",
         rows,
         [
@@ -226,7 +218,7 @@ def main(
             ),
         ],
     )
-    write_table(
+    common.write_table(
         f"scaling_k_exponents{tag}",
         exps,
         [
@@ -243,7 +235,7 @@ def main(
             "the exponent is the growth of the cost per step."
         ],
     )
-    fig, axes = new_figure(1, 1, w=6)
+    fig, axes = common.new_figure(1, 1, w=6)
     ax = axes[0][0]
     for c, e in enumerate(exps):
         pts = [
@@ -267,7 +259,7 @@ def main(
     ax.set_ylabel("wall time (s)")
     ax.set_title(f"cost vs k, {formulation}, EA={EA:g}, {start}")
     ax.legend(fontsize=7)
-    savefig(fig, f"scaling_k{tag}")
+    common.savefig(fig, f"scaling_k{tag}")
     return rows, exps
 
 
@@ -291,12 +283,12 @@ if __name__ == "__main__":
     a = p.parse_args()
     peers = None
     if a.peers is not None:
-        peers = [] if a.peers == "none" else parse_list(a.peers, str)
+        peers = [] if a.peers == "none" else common.parse_list(a.peers, str)
     main(
         quick=a.quick,
         formulation=a.formulation,
-        ks=parse_list(a.ks, int),
-        solvers=parse_list(a.solvers, str),
+        ks=common.parse_list(a.ks, int),
+        solvers=common.parse_list(a.solvers, str),
         repeats=a.repeats or None,
         out_name=a.name,
         start=a.start,

@@ -26,19 +26,9 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _common as common
 import numpy as np
 import references
-from _common import (
-    MAX_STEPS,
-    end_mass_error,
-    new_figure,
-    parse_list,
-    run_jaxstring,
-    run_peer,
-    savefig,
-    solver_names,
-    write_table,
-)
 
 import jaxstring
 
@@ -100,7 +90,7 @@ def main(
     tols = tols or ((1e-4, 1e-6) if quick else TOLS)
     repeats = repeats or (1 if quick else 3)
     ref_tol = 1e-10 if quick else ref_tol
-    names = solvers or (["kvaerno5"] if quick else solver_names("adaptive"))
+    names = solvers or (["kvaerno5"] if quick else common.solver_names("adaptive"))
     names = [n for n in names if n in jaxstring.SOLVERS and jaxstring.SOLVERS[n][1]]
     avail = references.available()
     peers = peers or (["cvode-BDF"] if quick else list(references.PEERS))
@@ -113,21 +103,21 @@ def main(
                 formulation=form, k=k, EA=EA, t1=t1
             )
             ref_a, lab_a, ref_b, lab_b = references_pair(
-                scene, ts, ref_tol, MAX_STEPS if quick else 1_000_000
+                scene, ts, ref_tol, common.MAX_STEPS if quick else 1_000_000
             )
-            floor = end_mass_error(ref_a, ref_b)
+            floor = common.end_mass_error(ref_a, ref_b)
             floors.append(f"{form} EA={EA:g}: |{lab_a} - {lab_b}| = {floor:.2e} m")
             rhs = references.JaxRHS(scene)
             curves = [(n, "js") for n in names] + [(p, "peer") for p in peers]
             for who, kind in curves:
                 for tol in tols:
                     if kind == "js":
-                        r = run_jaxstring(
+                        r = common.run_jaxstring(
                             scene, who, ts, rtol=tol, atol=tol, repeats=repeats
                         )
                         ref = ref_a
                     else:
-                        r = run_peer(
+                        r = common.run_peer(
                             rhs, who, PEER_JAC, ts, rtol=tol, atol=tol, repeats=repeats
                         )
                         ref = ref_a if who == "scipy-Radau" else ref_b
@@ -137,7 +127,7 @@ def main(
                         EA=EA,
                         tol=tol,
                         kind=kind,
-                        err_m=end_mass_error(end, ref) if r["ok"] else math.nan,
+                        err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
                     )
                     rows.append(r)
                     print(
@@ -148,7 +138,7 @@ def main(
                     if not r["ok"] or r["run_s"] > budget_s:
                         break  # tighter tolerances would only cost more
     tag = ("_quick" if quick else "") + (f"_{out_name}" if out_name else "")
-    write_table(
+    common.write_table(
         f"work_precision{tag}",
         rows,
         [
@@ -178,7 +168,7 @@ def main(
         ],
     )
     head = headline(rows, formulations, EAs, names, peers)
-    write_table(
+    common.write_table(
         f"work_precision_headline{tag}",
         head,
         [
@@ -243,7 +233,7 @@ def headline(rows, formulations, EAs, names, peers):
 
 
 def _plot(rows, formulations, EAs, tag):
-    fig, axes = new_figure(len(EAs), len(formulations), w=4.2, h=3.4)
+    fig, axes = common.new_figure(len(EAs), len(formulations), w=4.2, h=3.4)
     for i, form in enumerate(formulations):
         for j, EA in enumerate(EAs):
             ax = axes[i][j]
@@ -270,7 +260,7 @@ def _plot(rows, formulations, EAs, tag):
             ax.set_ylabel("end-mass error (m)")
             ax.grid(True, which="major", alpha=0.3)
     axes[0][0].legend(fontsize=6)
-    savefig(fig, f"work_precision{tag}")
+    common.savefig(fig, f"work_precision{tag}")
 
 
 if __name__ == "__main__":
@@ -286,11 +276,11 @@ if __name__ == "__main__":
     a = p.parse_args()
     main(
         quick=a.quick,
-        formulations=parse_list(a.formulations, str),
-        EAs=parse_list(a.EAs),
-        tols=parse_list(a.tols),
-        solvers=parse_list(a.solvers, str),
-        peers=parse_list(a.peers, str),
+        formulations=common.parse_list(a.formulations, str),
+        EAs=common.parse_list(a.EAs),
+        tols=common.parse_list(a.tols),
+        solvers=common.parse_list(a.solvers, str),
+        peers=common.parse_list(a.peers, str),
         repeats=a.repeats or None,
         out_name=a.name,
     )

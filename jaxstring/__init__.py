@@ -24,6 +24,10 @@ from ._fit import (
     gauss_newton as gauss_newton,
     value_and_grad as value_and_grad,
 )
+from ._least_squares import (
+    LeastSquaresResult as LeastSquaresResult,
+    least_squares as least_squares,
+)
 from ._model import AbstractModel as AbstractModel
 from ._scene import Scene as Scene
 from ._simulate import SolveConfig as SolveConfig, simulate as simulate, solve as solve
