@@ -35,6 +35,7 @@ from _common import (
     run_jaxstring,
     run_peer,
     savefig,
+    set_quick,
     solver_names,
     write_table,
 )
@@ -167,6 +168,7 @@ def main(
     budget_s=120.0,
 ):
     """Run the Fig 10 study; return the result rows."""
+    set_quick(quick)
     k = 8 if quick else PAPER["k"]
     t1 = 0.2 if quick else PAPER["t1"]
     EAs = EAs or ((1e4, 1e6) if quick else EAS)

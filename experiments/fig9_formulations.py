@@ -30,6 +30,7 @@ from _common import (
     run_jaxstring,
     run_peer,
     savefig,
+    set_quick,
     solver_names,
     write_table,
 )
@@ -53,6 +54,7 @@ def main(
     budget_s=120.0,
 ):
     """Run the Fig 9 study; return the rows (one per formulation, EA, solver)."""
+    set_quick(quick)
     k = 8 if quick else 40
     t1 = 0.2 if quick else 2.0
     formulations = formulations or (

@@ -36,6 +36,7 @@ from _common import (
     run_jaxstring,
     run_peer,
     savefig,
+    set_quick,
     solver_names,
     write_table,
 )
@@ -93,6 +94,7 @@ def main(
     out_name="",
 ):
     """Run the work-precision study; return (rows, headline rows)."""
+    set_quick(quick)
     k = 8 if quick else 40
     t1 = 0.2 if quick else 2.0
     formulations = formulations or (("angle",) if quick else FORMULATIONS)
@@ -282,7 +284,12 @@ if __name__ == "__main__":
     p.add_argument("--solvers", default="")
     p.add_argument("--peers", default="")
     p.add_argument("--repeats", type=int, default=0)
-    p.add_argument("--name", default="", help="suffix of the result files")
+    p.add_argument(
+        "--name",
+        default="",
+        help="name of a variant study: files work_precision_<name>.* "
+        "(default: work_precision.*)",
+    )
     a = p.parse_args()
     main(
         quick=a.quick,
