@@ -41,13 +41,31 @@ import numpy as np
 RESULTS = pathlib.Path(__file__).resolve().parent / "results"
 
 
+# Set by `set_quick` (each script's `main(quick=...)` calls it first).
+_QUICK = False
+
+
+def set_quick(quick: bool) -> None:
+    """Mark this process's run as a `--quick` one: its files go to results/quick/."""
+    global _QUICK
+    _QUICK = bool(quick)
+
+
+def is_quick() -> bool:
+    """A quick run: `set_quick(True)`, `--quick` on the command line, or $SMOKE_TEST."""
+    return _QUICK or "--quick" in sys.argv or bool(os.environ.get("SMOKE_TEST"))
+
+
 def results_dir() -> pathlib.Path:
     """Where a script writes: experiments/results/ (the latest full run of each study,
-    kept in git), experiments/results/quick/ for a `--quick` run (git-ignored), or
-    $JAXSTRING_RESULTS_DIR (the smoke test: a tmp dir)."""
+    under the study's plain name, kept in git), experiments/results/quick/ for a quick
+    run (git-ignored), or $JAXSTRING_RESULTS_DIR (the smoke test: a tmp dir)."""
     if "JAXSTRING_RESULTS_DIR" in os.environ:
-        return pathlib.Path(os.environ["JAXSTRING_RESULTS_DIR"])
-    return RESULTS / "quick" if "--quick" in sys.argv else RESULTS
+        out = pathlib.Path(os.environ["JAXSTRING_RESULTS_DIR"])
+    else:
+        out = RESULTS / "quick" if is_quick() else RESULTS
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
 
 # One run longer than this (s) is not repeated three times (2-core shared machine):
@@ -70,11 +88,16 @@ def _cpu_model() -> str:
     return ""
 
 
+def command_line() -> str:
+    """The command that runs this process (`python experiments/X.py ...`)."""
+    return "python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:])
+
+
 def machine_stamp() -> dict:
-    """Date, processor, cores, load and versions, for every results table."""
+    """Date, command, processor, cores, load and versions, for every results table."""
     return {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "command": "python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:]),
+        "command": command_line(),
         "processor": platform.processor() or _cpu_model() or platform.machine(),
         "cores": os.cpu_count(),
         "load_1min": round(os.getloadavg()[0], 2),
@@ -157,22 +180,30 @@ def fmt(x, spec=".3g") -> str:
     return str(x)
 
 
+def stamp_line() -> str:
+    """The stamp as one line: `date: ..., command: ..., processor: ..., ...`."""
+    return ", ".join(f"{k}: {v}" for k, v in machine_stamp().items())
+
+
+def stamp_markdown() -> str:
+    """The stamp line of a markdown table (`_date: ..., command: ..., ..._`)."""
+    return f"_{stamp_line()}_"
+
+
 def write_table(name: str, rows: list, columns: list, title: str, notes=()):
     """Write `results/<name>.csv` and `results/<name>.md` (stamped); print the table.
 
     `rows` are dicts; `columns` the keys to show, in order.
     """
     out = results_dir()
-    out.mkdir(parents=True, exist_ok=True)
-    stamp = machine_stamp()
-    stamp_line = ", ".join(f"{k}: {v}" for k, v in stamp.items())
+    stamp_line_ = stamp_line()
     with open(out / f"{name}.csv", "w", newline="") as f:
-        f.write(f"# {title}\n# {stamp_line}\n")
+        f.write(f"# {title}\n# {stamp_line_}\n")
         w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         w.writeheader()
         for r in rows:
             w.writerow({c: r.get(c, "") for c in columns})
-    lines = [f"## {title}", "", f"_{stamp_line}_", ""]
+    lines = [f"## {title}", "", f"_{stamp_line_}_", ""]
     lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         lines.append("| " + " | ".join(fmt(r.get(c)) for c in columns) + " |")
@@ -189,7 +220,6 @@ def write_table(name: str, rows: list, columns: list, title: str, notes=()):
 def savefig(fig, name: str):
     import matplotlib.pyplot as plt
 
-    results_dir().mkdir(parents=True, exist_ok=True)
     path = results_dir() / f"{name}.png"
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)

@@ -10,7 +10,7 @@ algorithm ported; sparse JAX Jacobian) -- all in the same run.
 Error: max over 201 save times of the end-mass distance to Rodas5P at
 rtol = atol = 1e-10. Times: median of repeats after compile; compile separately.
 
-Writes experiments/results/bench_bdf{,_quick}.{md,csv}.
+Writes experiments/results/bench_bdf.{md,csv}.
 Run: ``python experiments/bench_bdf.py [--quick]`` (quick: k = 10, 0.5 s,
 EA in {1e4, 1e6}; about a minute).
 """
@@ -81,6 +81,7 @@ def run_scipy_bdf(scene, ts, rtol, atol, repeats):
 
 
 def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
+    common.set_quick(quick)
     tag = "_quick" if quick else ""
     k = k or (10 if quick else 40)
     t1 = 0.5 if quick else 2.0

@@ -15,7 +15,7 @@ what end-mass error, and how does the best one scale with the number of elements
   (3 b coloured JVPs), one block-cyclic-reduction factorisation and one solve,
   measured inside a compiled loop, against the dense jacfwd + LU path.
 
-Writes experiments/results/bench_solvers{,_quick}.{md,csv,png}.
+Writes experiments/results/bench_solvers.{md,csv,png}.
 Run: ``python experiments/bench_solvers.py [--quick]`` (quick: k = 10, 0.5 s, EA in
 {1e4, 1e6}, k = 10 ... 40; a smoke test, about a minute).
 """
@@ -183,6 +183,7 @@ def main(
     kmax=None,
     table1=True,
 ):
+    common.set_quick(quick)
     tag = ("_quick" if quick else "") + suffix
     k = 10 if quick else 40
     t1 = 0.5 if quick else 2.0

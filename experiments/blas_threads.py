@@ -25,7 +25,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from _common import new_figure, savefig, write_table
+from _common import new_figure, savefig, set_quick, write_table
 
 
 N = 160
@@ -95,6 +95,7 @@ def run_mode(label, reps):
 
 
 def main(quick=False):
+    set_quick(quick)
     reps = 20 if quick else 200
     rows = [run_mode(label, reps) for label in MODES]
     base = next(r for r in rows if r["config"] == "threads=1")

@@ -11,7 +11,7 @@ the default) and detected by probing (`jaxstring._linalg.banded.detect_width`, w
 compiles a probe at trace time).
 
 String pendulum, displacement variables, k = 40, EA = 1e6 N, alpha = 0.01 s, 2 s,
-rtol = atol = 1e-6. Writes experiments/results/compile_time{,_quick}.{csv,md}.
+rtol = atol = 1e-6. Writes experiments/results/compile_time.{csv,md}.
 Run: ``python experiments/compile_time.py [--quick]`` (quick: k = 10, two solvers).
 """
 
@@ -71,6 +71,9 @@ def child(solver, mode, k):
 
 
 def main(quick=False):
+    from _common import set_quick
+
+    set_quick(quick)
     from _common import write_table
 
     k = 10 if quick else 40

@@ -158,6 +158,7 @@ def main(
     budget_s=120.0,
 ):
     """Run the Fig 10 study; return the result rows."""
+    common.set_quick(quick)
     k = 8 if quick else PAPER["k"]
     t1 = 0.2 if quick else PAPER["t1"]
     EAs = EAs or ((1e4, 1e6) if quick else EAS)

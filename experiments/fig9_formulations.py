@@ -44,6 +44,7 @@ def main(
     budget_s=120.0,
 ):
     """Run the Fig 9 study; return the rows (one per formulation, EA, solver)."""
+    common.set_quick(quick)
     k = 8 if quick else 40
     t1 = 0.2 if quick else 2.0
     formulations = formulations or (

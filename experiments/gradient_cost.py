@@ -22,14 +22,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring import _fit
-
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 
 
 def loss_fn(traj, scene):
@@ -52,6 +48,7 @@ def timed(f, repeats):
 
 
 def main(quick=False, k=20, t1=1.0, repeats=5):
+    set_quick(quick)
     if quick:
         k, t1, repeats = 8, 0.5, 3
     rows = []
@@ -105,14 +102,16 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
                 f"ratio {t_g / t_f:.2f}  (compile {c_g - t_g:.1f} s)",
                 flush=True,
             )
-    os.makedirs(OUT, exist_ok=True)
     keys = list(rows[0])
-    with open(os.path.join(OUT, "gradient_cost.csv"), "w") as f:
+    with open(os.path.join(results_dir(), "gradient_cost.csv"), "w") as f:
         f.write(",".join(keys) + "\n")
         for r in rows:
             f.write(",".join(str(r[k_]) for k_ in keys) + "\n")
-    with open(os.path.join(OUT, "gradient_cost.md"), "w") as f:
+    with open(os.path.join(results_dir(), "gradient_cost.md"), "w") as f:
         f.write(
+            "# Cost of a gradient relative to the forward solve\n\n"
+            + stamp_markdown()
+            + "\n\n"
             f"Gradient of a loss w.r.t. (alpha, EA), string pendulum k={k}, "
             f"t1={t1} s, Kvaerno5 rtol=atol=1e-8; medians of {repeats} runs, "
             "compile excluded.\n\n| formulation | adjoint | steps | forward s | "
@@ -131,7 +130,7 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
     ax.set_ylabel("gradient time / forward time")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(OUT, "gradient_cost.png"), dpi=120)
+    fig.savefig(os.path.join(results_dir(), "gradient_cost.png"), dpi=120)
     return rows
 
 

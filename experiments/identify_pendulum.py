@@ -17,7 +17,7 @@ midpoint and end paths of k = 8 and k = 16 differ by 22 mm, far more than the
 biased (alpha by +27 % at k_fit = 4 against k_data = 8). The bounce converges at
 second order (k = 8 vs 16: 4e-6 m; 16 vs 32: 1e-6 m). Run:
 python experiments/identify_pendulum.py [--quick]. Writes
-experiments/results/identify_pendulum[_quick].{csv,md,png}.
+experiments/results/identify_pendulum.{csv,md,png}.
 """
 
 import os
@@ -36,14 +36,10 @@ import optax
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring import _fit
-
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 
 
 class Residual(eqx.Module):
@@ -89,6 +85,7 @@ def main(
     eps0=0.05,
     steps=20,
 ):
+    set_quick(quick)
     if quick:
         k_fit, steps = 4, 10
     k_data = 2 * k_fit
@@ -140,15 +137,17 @@ def main(
             f"{r['value']:.6g}  {r['std']:.3g}  {r['rel_error']:+.2%}  "
             f"{r['error_in_std']:+.2f}"
         )
-    os.makedirs(OUT, exist_ok=True)
     tag = "_quick" if quick else ""
     keys = list(rows[0])
-    with open(os.path.join(OUT, f"identify_pendulum{tag}.csv"), "w") as f:
+    with open(os.path.join(results_dir(), f"identify_pendulum{tag}.csv"), "w") as f:
         f.write(",".join(keys) + "\n")
         for r in rows:
             f.write(",".join(str(r[k_]) for k_ in keys) + "\n")
-    with open(os.path.join(OUT, f"identify_pendulum{tag}.md"), "w") as f:
+    with open(os.path.join(results_dir(), f"identify_pendulum{tag}.md"), "w") as f:
         f.write(
+            "# Identification of alpha (and EA) from a bouncing string pendulum\n\n"
+            + stamp_markdown()
+            + "\n\n"
             f"Bounce released at eps0 = {eps0:g}, theta0 = 0. Data: (eps, t) "
             f"formulation, k={k_data}, Kvaerno3 rtol 1e-10, {n_t} times over {t1} s, "
             f"midpoint and end positions, noise {noise * 1e3:.0f} mm. Fit: (eps, phi) "
@@ -177,7 +176,7 @@ def main(
     axes[1].set_ylabel("chi^2 per residual")
     axes[1].legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(OUT, f"identify_pendulum{tag}.png"), dpi=120)
+    fig.savefig(os.path.join(results_dir(), f"identify_pendulum{tag}.png"), dpi=120)
     return rows
 
 

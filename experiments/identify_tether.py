@@ -16,7 +16,7 @@ reported next to the statistical error.
 
     python experiments/identify_tether.py [--quick]
 
-Writes results/identify_tether{,_quick}.{md,csv,png}.
+Writes results/identify_tether.{md,csv,png}.
 """
 
 import os
@@ -115,6 +115,7 @@ def identify(N_fit, ts, data, noise, c_n0, steps=12, print_every=2):
 
 def main(quick=False, c_n=1.0, noise=1.0):
     """Identify c_n (truth `c_n`) from end forces with Gaussian noise `noise` N."""
+    C.set_quick(quick)
     sfx = "_quick" if quick else ""
     # The end force converges like 1/N (tow-phase Fx: -169, -187, -198, -204 N at
     # N = 10, 20, 40, 80), and c_n absorbs about twice the relative force error:

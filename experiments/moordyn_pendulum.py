@@ -190,6 +190,7 @@ def jaxstring_scene(nodes0, t1):
 
 def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
     """Run the comparison; return the rows."""
+    common.set_quick(quick)
     t1 = 4.0 if quick else LINE["t1"]
     ts = np.round(np.arange(0.0, t1 + 1e-9, 0.1), 10)
     repeats = repeats or (1 if quick else 3)

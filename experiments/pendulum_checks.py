@@ -12,9 +12,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import datetime
 import math
-import platform
 import sys
 
 import numpy as np
@@ -29,6 +27,9 @@ from tests.test_physics import HARD_CASES, G, _axial_mode_scene  # noqa: E402
 
 
 def main(quick: bool = False) -> str:
+    from _common import results_dir, set_quick, stamp_markdown
+
+    set_quick(quick)
     rows = []
     for f in FORMULATIONS:
         scene, omega = _axial_mode_scene(f, k=40, EA=1e4, V=1e-3, t1=0.25)
@@ -110,14 +111,13 @@ def main(quick: bool = False) -> str:
     lines = [
         "# String pendulum checks (measured)",
         "",
-        f"{datetime.date.today()}, {platform.machine()} {platform.processor()}, "
-        f"{os.cpu_count()} cores. Script: experiments/pendulum_checks.py",
+        stamp_markdown(),
         "",
         "| check | formulation | value |",
         "|---|---|---|",
     ] + [f"| {a} | {b} | {c} |" for a, b, c in rows]
     text = "\n".join(lines) + "\n"
-    out = os.path.join(os.path.dirname(__file__), "results", "pendulum_checks.md")
+    out = results_dir() / ("pendulum_checks" + ("_quick" if quick else "") + ".md")
     with open(out, "w") as fh:
         fh.write(text)
     print(text)

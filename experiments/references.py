@@ -322,6 +322,9 @@ def main(
     rtol: float = 1e-7,
 ):
     """Time every available peer and Jacobian variant on one scene (a sanity table)."""
+    from _common import set_quick
+
+    set_quick(quick)
     from _common import end_mass_error, timed, timed_split, write_table
 
     if quick:

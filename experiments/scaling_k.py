@@ -88,6 +88,7 @@ def main(
     the rounds. A shared machine's slow phases then fall on all k alike instead of
     on whichever k was running, which moves a fitted exponent by up to 0.1 here.
     """
+    common.set_quick(quick)
     ks = ks or ((4, 8) if quick else KS)
     t1 = 0.2 if quick else 2.0
     repeats = repeats or (1 if quick else 3)
@@ -270,7 +271,11 @@ if __name__ == "__main__":
     p.add_argument("--ks", default="")
     p.add_argument("--solvers", default="")
     p.add_argument("--repeats", type=int, default=0)
-    p.add_argument("--name", default="", help="suffix of the result files")
+    p.add_argument(
+        "--name",
+        default="",
+        help="name of a variant study: files scaling_k_<name>.* (default: scaling_k.*)",
+    )
     p.add_argument("--start", default="release", choices=("release", "swing"))
     p.add_argument(
         "--peers", default=None, help="comma list of cvode-BDF, scipy-Radau; 'none'"

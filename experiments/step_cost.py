@@ -28,7 +28,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import new_figure, savefig, write_table  # sets XLA_FLAGS
+from _common import new_figure, savefig, set_quick, write_table  # sets XLA_FLAGS
 
 import jaxstring
 from jaxstring import _linalg
@@ -153,6 +153,7 @@ def simulate_per_step(k, t1):
 
 
 def main(quick=False):
+    set_quick(quick)
     ks = (40, 160) if quick else (40, 160, 640, 1280)
     n = 50 if quick else 200
     rows = []

@@ -1,20 +1,21 @@
-"""A 64-member parameter sweep against a Python loop of 64 simulate calls .
+"""A 64-member parameter sweep against a Python loop of 64 simulate calls.
 
-Goal of the issue: a sweep that matches the loop to 1e-10 *and* is at least 3x
-faster. Case: string pendulum (displacement variables, k = 20, EA = 1e6 N, t1 = 2 s),
-64 Kelvin-Voigt constants alpha in [0.005, 0.05] s. Two settings, each measured
+Goal: a sweep that matches the loop to 1e-10 *and* is at least 3x faster. Case:
+string pendulum (displacement variables, k = 20, EA = 1e6 N, t1 = 2 s), 64
+Kelvin-Voigt constants alpha in [0.005, 0.05] s. Two settings, each measured
 against its own loop, in the same process:
 
-* adaptive (the issue's case): Kvaerno3 at rtol = atol = 1e-6.
+* adaptive (the goal's case): Kvaerno3 at rtol = atol = 1e-6.
   - `lockstep, groups of 4 (sorted)`: the members of a group as one ODE with one
     shared step sequence (per-member error control, batched per-member Newton
     linear algebra): the fastest adaptive sweep, but each member takes other steps
     than its own solve, so it differs from the loop at the tolerance level.
   - `lockstep, groups of 1`: every member its own step sequence inside one
-    compiled `lax.map`, with diffrax's PID controller: the loop's steps (and equal
-    to rounding) while `simulate` used that controller too; `same_steps_as_loop`
-    checks it (simulate's Kvaerno default is now `jaxstring._solvers.step_size`'s
-    Newton-limited controller).
+    compiled `lax.map`, with diffrax's PID controller. `simulate`'s Kvaerno default
+    is the Newton-limited controller of `jaxstring._solvers.step_size`, so the
+    members take other steps than the loop's; `same_steps_as_loop` says whether
+    the step counts match (with the PID controller in both they match, and the
+    results agree to rounding).
 * fixed step: implicit Euler with the paper's step 0.005 s (`implicit_euler_fixed`,
   damped full Newton on the banded Jacobian) and a stage Newton tolerance of 1e-10:
   every member takes the same 400 steps alone and in the sweep, and each step's
@@ -22,8 +23,7 @@ against its own loop, in the same process:
   rounding whatever the grouping.
   - `vmap, groups of 4` / `16`: one solve per member, vmapped in groups (`lax.map`).
     The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`), which
-    made groups larger than 4
-    slower per member; the loop's `simulate` calls keep JAX's default.
+    make groups larger than 4 slower per member.
   - `lockstep, groups of g`: the members' node-major states concatenated along the
     node axis into one state of g k nodes: one banded Newton system per step for
     the whole group (`jaxstring._sweep._FlatBatch`).
@@ -43,9 +43,8 @@ Times: wall-clock and CPU time of this process (the machine is shared: its load 
 written into the table notes; the CPU-time ratio is the steadier measure); compile
 time separately (first call minus the timed call); all ratios measured in the same
 run. Run: nice -n 5 python experiments/sweep_speed.py [--quick]. Writes
-experiments/results/sweep_speed{,_quick}.{csv,md,png}, sweep_speed_profile* and
-sweep_speed_failure*. (Earlier measurements of vmap over all 64 members, Kvaerno5,
-groups of 8/16 and 2 devices are in sweep_speed_full_log.txt.)
+experiments/results/sweep_speed.{csv,md,png}, sweep_speed_profile.{csv,md} and
+sweep_speed_failure.{csv,md} (--quick: results/quick/, names ending in `_quick`).
 """
 
 import os
@@ -65,7 +64,7 @@ import time
 
 import jax
 import numpy as np
-from _common import end_mass_error, new_figure, savefig, write_table
+from _common import end_mass_error, new_figure, savefig, set_quick, write_table
 
 import jaxstring as js
 from jaxstring._sweep import sweep
@@ -204,7 +203,12 @@ def profile(k, Ms, quick):
     return rows
 
 
-def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
+def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
+    set_quick(quick)
+    if failure_only:
+        tag = "_quick" if quick else ""
+        fail = failure_demo(tag=tag) if quick else failure_demo(k=20, t1=0.5, tag=tag)
+        return None, fail
     tag = "_quick" if quick else ""
     load0 = os.getloadavg()
     if quick:
@@ -403,7 +407,7 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
             "diff_vs_loop: max |end-mass position difference| against the loop (m) "
             "over all members and save times; err_vs_ref: max end-mass distance to "
             f"Kvaerno5 at rtol=atol=1e-10 on members {ref_idx.tolist()} (m).",
-            "meets_goal (the issue's): diff_vs_loop <= 1e-10 and wall-clock speedup "
+            "meets_goal: diff_vs_loop <= 1e-10 and wall-clock speedup "
             ">= 3, all members ok. The CPU-time ratio is the work saved; with 2 "
             "devices the wall ratio also counts the second core (one thread per "
             "device), which the loop does not use except through XLA's own "
@@ -450,7 +454,15 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser()
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
+    p.add_argument(
+        "--failure-only",
+        action="store_true",
+        help="only the failure-isolation table (sweep_speed_failure.*)",
+    )
     a = p.parse_args()
-    main(quick=a.quick or bool(os.environ.get("SMOKE_TEST")))
+    main(
+        quick=a.quick or bool(os.environ.get("SMOKE_TEST")),
+        failure_only=a.failure_only,
+    )

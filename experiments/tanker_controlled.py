@@ -5,7 +5,9 @@ a model-mismatch check (the compensator believes C_Y and the wind areas 20 % off
 and the solver choice (tsit5 vs dopri5 vs kvaerno5 on the same scene: compile and
 run time, medians of repeats, ratios from this run).
 
-Writes results/tanker_controlled.{png,csv,md} (+ one figure per environment).
+Writes results/tanker_controlled.{md,csv} and one figure per environment,
+results/tanker_controlled_<env>.png (--quick: results/quick/, names ending in
+`_quick`).
 
     python experiments/tanker_controlled.py [--quick]
 """
@@ -22,17 +24,15 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
-from jaxstring import tanker_plot as tp
+from jaxstring.tandem import plot as tp
 from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
 from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled, tandem_model
 from jaxstring.tandem.vessels import fpso_hull, shuttle_hull
 
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 KEYS = CONTROLLED_METRICS
 
 
@@ -94,7 +94,7 @@ def mismatched(scene, factor_cy=1.2, factor_wind=0.8):
 
 
 def main(quick=False):
-    os.makedirs(OUT, exist_ok=True)
+    set_quick(quick)
     sfx = "_quick" if quick else ""
     t1 = 4000.0 if quick else 6000.0
     rows, lines, compile_s = [], [], {}
@@ -117,11 +117,11 @@ def main(quick=False):
                 tp.tandem_figure(
                     traj,
                     sc.model,
-                    os.path.join(OUT, f"tanker_controlled_{env}{sfx}.png"),
+                    os.path.join(results_dir(), f"tanker_controlled_{env}{sfx}.png"),
                     title=f"S4 law B, {env}",
                     d_ref=float(ctl.d_ref),
                 )
-    # Model mismatch (no integral action: K_I is not implemented, see report).
+    # Model mismatch (no integral action: the compensator has no integral term).
     lines += [
         "",
         "Model mismatch (law B believes C_Y x1.2 and wind areas x0.8; "
@@ -158,9 +158,9 @@ def main(quick=False):
         )
     text = "\n".join(lines)
     print(text)
-    with open(os.path.join(OUT, f"tanker_controlled{sfx}.md"), "w") as f:
-        f.write("# S4 controlled tandem\n\n" + text + "\n")
-    with open(os.path.join(OUT, f"tanker_controlled{sfx}.csv"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_controlled{sfx}.md"), "w") as f:
+        f.write("# S4 controlled tandem\n\n" + stamp_markdown() + "\n\n" + text + "\n")
+    with open(os.path.join(results_dir(), f"tanker_controlled{sfx}.csv"), "w") as f:
         f.write("law,env," + ",".join(KEYS) + "\n")
         for r in rows:
             f.write(

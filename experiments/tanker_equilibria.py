@@ -4,9 +4,9 @@ direction (spec S1), classified by the eigenvalues of the jacfwd Jacobian (S2).
 Newton (optimistix) from a 14 x 14 grid of (psi1, psi2) starts, vmapped over the
 starts *and* over the 28 windy cells in one compiled call. Prints the
 taut/admissible/stable table next to the spec's [P] numbers, and writes
-results/tanker_equilibria.{png,csv,md} (`_quick` suffix with --quick;
-$JAXSTRING_RESULTS_DIR overrides the folder). Compile time is reported apart from the
-run time (median of repeats).
+results/tanker_equilibria.{png,csv,md} (--quick: results/quick/, names ending in
+`_quick`; $JAXSTRING_RESULTS_DIR overrides the folder). Compile time is reported
+apart from the run time (median of repeats).
 
 With --methods it also runs the same search with optimistix Dogleg and
 Levenberg-Marquardt (`find_equilibria(method=...)`) and with scipy's MINPACK
@@ -28,17 +28,13 @@ import argparse
 import time
 
 import numpy as np
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring  # noqa: F401
-from jaxstring import tanker_plot as tp
 from jaxstring.cli.tandem import S1_CELLS_FULL, S1_SPEC
+from jaxstring.tandem import plot as tp
 from jaxstring.tandem.analysis import counts, find_equilibria, find_equilibria_map
 from jaxstring.tandem.scenes import tandem_equilibria
-
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 
 
 def _hybr_cell(scene, factor=1.0):
@@ -132,14 +128,24 @@ def compare_methods(cells, newton, sfx):
     ]
     text = "\n".join(lines)
     print(text)
-    with open(os.path.join(OUT, f"tanker_equilibria_methods{sfx}.md"), "w") as f:
-        f.write("# S1 equilibrium counts by solver\n\n" + text + "\n")
-    with open(os.path.join(OUT, f"tanker_equilibria_methods{sfx}.csv"), "w") as f:
+    with open(
+        os.path.join(results_dir(), f"tanker_equilibria_methods{sfx}.md"), "w"
+    ) as f:
+        f.write(
+            "# S1 equilibrium counts by solver\n\n"
+            + stamp_markdown()
+            + "\n\n"
+            + text
+            + "\n"
+        )
+    with open(
+        os.path.join(results_dir(), f"tanker_equilibria_methods{sfx}.csv"), "w"
+    ) as f:
         f.write("\n".join(csv) + "\n")
 
 
 def main(quick=False, repeats=3, methods=False):
-    os.makedirs(OUT, exist_ok=True)
+    set_quick(quick)
     sfx = "_quick" if quick else ""
     cells = S1_CELLS_FULL
     if quick:
@@ -162,7 +168,7 @@ def main(quick=False, repeats=3, methods=False):
     tp.equilibrium_map(
         cells,
         ordered,
-        os.path.join(OUT, f"tanker_equilibria{sfx}.png"),
+        os.path.join(results_dir(), f"tanker_equilibria{sfx}.png"),
         title="S1: FPSO + shuttle equilibria, current 1 m/s",
     )
     lines = [
@@ -192,9 +198,9 @@ def main(quick=False, repeats=3, methods=False):
     )
     text = "\n".join(lines)
     print(text)
-    with open(os.path.join(OUT, f"tanker_equilibria{sfx}.md"), "w") as f:
-        f.write("# S1 equilibrium map\n\n" + text + "\n")
-    with open(os.path.join(OUT, f"tanker_equilibria{sfx}.csv"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_equilibria{sfx}.md"), "w") as f:
+        f.write("# S1 equilibrium map\n\n" + stamp_markdown() + "\n\n" + text + "\n")
+    with open(os.path.join(results_dir(), f"tanker_equilibria{sfx}.csv"), "w") as f:
         f.write("\n".join(csv) + "\n")
     if methods:
         compare_methods(cells, results, sfx)

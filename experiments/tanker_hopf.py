@@ -21,21 +21,19 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
-from jaxstring import tanker_plot as tp
+from jaxstring.tandem import plot as tp
 from jaxstring.tandem.analysis import hopf_sweep, measure_limit_cycle
 from jaxstring.tandem.scenes import tandem_hopf
 
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 SPEC = {40e3: (2074, 7.8), 35e3: (2345, 11.5), 20e3: (3065, 15.3), 0.0: (3400, 18.0)}
 
 
 def main(quick=False):
-    os.makedirs(OUT, exist_ok=True)
+    set_quick(quick)
     sfx = "_quick" if quick else ""
     Fs = np.linspace(0.0, 60e3, 7 if quick else 25)
     t = time.perf_counter()
@@ -45,7 +43,7 @@ def main(quick=False):
     tp.sweep_figure(
         Fs / 1e3,
         lead,
-        os.path.join(OUT, f"tanker_hopf_sweep{sfx}.png"),
+        os.path.join(results_dir(), f"tanker_hopf_sweep{sfx}.png"),
         "astern pull F_ast, kN",
         "S3b: fishtail pair of the aligned equilibrium",
         marks=[F_star / 1e3],
@@ -99,7 +97,7 @@ def main(quick=False):
         tp.tandem_figure(
             traj,
             sc.model,
-            os.path.join(OUT, f"tanker_hopf_{F / 1e3:.0f}kN{sfx}.png"),
+            os.path.join(results_dir(), f"tanker_hopf_{F / 1e3:.0f}kN{sfx}.png"),
             title=f"limit cycle, F_ast = {F / 1e3:.0f} kN",
         )
     lines.append("")
@@ -109,9 +107,15 @@ def main(quick=False):
     )
     text = "\n".join(lines)
     print(text)
-    with open(os.path.join(OUT, f"tanker_hopf{sfx}.md"), "w") as f:
-        f.write("# S3 Hopf sweep and limit cycles\n\n" + text + "\n")
-    with open(os.path.join(OUT, f"tanker_hopf{sfx}.csv"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_hopf{sfx}.md"), "w") as f:
+        f.write(
+            "# S3 Hopf sweep and limit cycles\n\n"
+            + stamp_markdown()
+            + "\n\n"
+            + text
+            + "\n"
+        )
+    with open(os.path.join(results_dir(), f"tanker_hopf{sfx}.csv"), "w") as f:
         f.write("\n".join(csv) + "\n")
 
 

@@ -1,5 +1,5 @@
-"""The hawser as a real line (tanker issue, item 2): what mass, weight and drag of
-the line change in the tandem, and what they cost.
+"""The hawser as a real line: what mass, weight and drag of the line change in the
+tandem, and what they cost.
 
 1. Stability of the aligned equilibrium (spec S2): the leading eigenvalue pair
    with the massless hawser, with a light line (the massless limit) and with a
@@ -15,8 +15,9 @@ the line change in the tandem, and what they cost.
    the hawser, the nonlinear compensator keeping the massless hawser as its model
    of the line, against the S4 acceptance list, for all four environments.
 
-Writes results/tanker_line.{md,csv,png} (`_quick` suffix with --quick) and, with
---controlled, results/tanker_line_controlled.{md,csv}.
+Writes results/tanker_line.{md,csv,png} and, with --controlled,
+results/tanker_line_controlled.{md,csv} (--quick: results/quick/, names ending in
+`_quick`).
 
     python experiments/tanker_line.py [--quick] [--controlled]
 """
@@ -32,7 +33,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring.tandem.analysis import measure_limit_cycle
@@ -40,8 +41,6 @@ from jaxstring.tandem.line import line_equilibrium, with_line
 from jaxstring.tandem.scenes import tandem_fishtail
 
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = str(results_dir())
 LIGHT = dict(mass_per_length=0.01, gravity=False, c_n=0.0, c_t=0.0)
 
 
@@ -159,7 +158,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
         "span_min",
         "tension_max",
     ]
-    with open(os.path.join(OUT, f"tanker_line{sfx}.csv"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_line{sfx}.csv"), "w") as f:
         f.write(
             "hawser,N,solver,tol,status,steps,compile_s,run_s,cpu_s,"
             + ",".join(keys)
@@ -185,10 +184,9 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
                 + "\n"
             )
     lines = [
-        "# The hawser as a line with mass and drag (tanker issue, item 2)",
+        "# The hawser as a line with mass and drag",
         "",
-        f"_{time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f}, "
-        f"jax {jax.__version__}_",
+        stamp_markdown(),
         "",
         "## Aligned equilibrium, current 1 m/s (spec S2)",
         "",
@@ -235,7 +233,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
         "the slack line comes taut set the step size.",
     ]
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(OUT, f"tanker_line{sfx}.md"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_line{sfx}.md"), "w") as f:
         f.write(text)
     print(text)
 
@@ -255,7 +253,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
     axes[0].legend(fontsize=7)
     fig.suptitle("Fishtailing: massless hawser vs a line with mass and drag")
     fig.tight_layout()
-    fig.savefig(os.path.join(OUT, f"tanker_line{sfx}.png"), dpi=110)
+    fig.savefig(os.path.join(results_dir(), f"tanker_line{sfx}.png"), dpi=110)
     plt.close(fig)
 
 
@@ -263,6 +261,7 @@ def controlled(quick):
     from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
     from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled
 
+    set_quick(quick)
     t1 = 4000.0 if quick else 6000.0
     sfx = "_quick" if quick else ""
     keys = list(CONTROLLED_METRICS)
@@ -302,15 +301,18 @@ def controlled(quick):
         "cpu_s",
         *keys,
     ]
-    with open(os.path.join(OUT, f"tanker_line_controlled{sfx}.csv"), "w") as f:
+    with open(
+        os.path.join(results_dir(), f"tanker_line_controlled{sfx}.csv"), "w"
+    ) as f:
         f.write(",".join(head) + "\n")
         for r in rows:
             f.write(",".join(str(r[k]) for k in head) + "\n")
     lines = [
         "# S4 with the hawser as a line (mass, weight, drag)",
         "",
-        f"_{time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f}; "
-        f"{t1:.0f} s, acceptance after 3000 s (span error < 0.5 m, heading error "
+        stamp_markdown(),
+        "",
+        f"_{t1:.0f} s, acceptance after 3000 s (span error < 0.5 m, heading error "
         "< 0.5 deg, no hull contact, actuator limits); the compensator's internal "
         "model keeps the massless hawser_",
         "",
@@ -329,13 +331,13 @@ def controlled(quick):
             f"{r['X_final'] / 1e3:.0f} | {r['ok']} |"
         )
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(OUT, f"tanker_line_controlled{sfx}.md"), "w") as f:
+    with open(os.path.join(results_dir(), f"tanker_line_controlled{sfx}.md"), "w") as f:
         f.write(text)
     print(text)
 
 
 def main(quick=False):
-    os.makedirs(OUT, exist_ok=True)
+    set_quick(quick)
     rows_s, lam0 = stability_rows(quick)
     rows_f, trajs, t1 = fishtail_rows(quick)
     write(rows_s, lam0, rows_f, trajs, t1, quick)
@@ -351,7 +353,6 @@ if __name__ == "__main__":
     )
     args = ap.parse_args()
     if args.controlled:
-        os.makedirs(OUT, exist_ok=True)
         controlled(args.quick)
     else:
         main(args.quick)

@@ -28,7 +28,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir
+from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 import jaxstring.tether.plot as tplot
@@ -39,7 +39,6 @@ from jaxstring.tether.models import AceamTether, ExactTether, FixedEnd
 from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 
-OUT = str(results_dir())
 TS = jnp.concatenate([jnp.arange(0.025, 70.0, 0.05), jnp.array([70.0])])
 K_ACEAM = 1e4
 
@@ -145,7 +144,7 @@ def v_release(method, interior_deg, N=11, L=10.0):
 
 
 def main(quick=False):
-    os.makedirs(OUT, exist_ok=True)
+    set_quick(quick)
     repeats = 1 if quick else 3
     rows = []
 
@@ -155,14 +154,14 @@ def main(quick=False):
     # Solver check: 100 times tighter tolerances (one repeat, not in the ratios).
     a8, ca8, ra8, pa8 = timed(tether_fixed("aceam"), 1, rtol=1e-8)
     rows.append(summary("fixed aceam (rtol = atol = 1e-8)", a8, ca8, ra8, pa8))
-    # The previous drag model: c_t on the wetted surface pi d l_e.
+    # The other tangential-drag area: c_t on the wetted surface pi d l_e.
     aw, caw, raw, paw = timed(tether_fixed("aceam", tangential_area="wetted"), 1)
     rows.append(summary("fixed aceam (D_t = pi d l_e)", aw, caw, raw, paw))
     ew, cew, rew, pew = timed(tether_fixed("exact", tangential_area="wetted"), 1)
     rows.append(summary("fixed exact (D_t = pi d l_e, sharp)", ew, cew, rew, pew))
     tplot.summary_figure(
         a,
-        os.path.join(OUT, "tether_fixed.png"),
+        os.path.join(results_dir(), "tether_fixed.png"),
         "tether-fixed (ACEAM, Table 1, dopri5)",
     )
     e0, ce0, re0, pe0 = timed(tether_fixed("exact"), repeats)
@@ -202,7 +201,7 @@ def main(quick=False):
     rows.append(summary("winch aceam (law as printed)", w0, cw0, rw0, pw0))
     tplot.summary_figure(
         w1,
-        os.path.join(OUT, "tether_winch.png"),
+        os.path.join(results_dir(), "tether_winch.png"),
         "tether-winch (ACEAM, reference model on the tracking error, dopri5)",
     )
     w2, cw2, rw2, pw2 = timed(tether_winch("exact", smoothing=1.0), repeats)
@@ -254,11 +253,13 @@ def main(quick=False):
 
     # -- outputs
     keys = list(rows[0])
-    with open(os.path.join(OUT, "tether_compare.csv"), "w", newline="") as f:
+    with open(os.path.join(results_dir(), "tether_compare.csv"), "w", newline="") as f:
         wr = csv.DictWriter(f, keys)
         wr.writeheader()
         wr.writerows(rows)
-    with open(os.path.join(OUT, "tether_sharp_bend.csv"), "w", newline="") as f:
+    with open(
+        os.path.join(results_dir(), "tether_sharp_bend.csv"), "w", newline=""
+    ) as f:
         wr = csv.DictWriter(f, list(sharp[0]))
         wr.writeheader()
         wr.writerows(sharp)
@@ -283,7 +284,8 @@ def main(quick=False):
     lines = [
         "# Tether: ACEAM vs exact tensions vs LMS (Blintsov 2017, Table 1)",
         "",
-        f"`python experiments/tether_compare.py{' --quick' if quick else ''}`; "
+        stamp_markdown(),
+        "",
         f"dopri5, rtol = atol = 1e-6 (exact: same), 70 s, N = 101; run time = "
         f"median of {repeats} compiled run(s); {os.cpu_count()} CPU cores, shared.",
         "",
@@ -371,7 +373,7 @@ def main(quick=False):
         "`tether_moordyn.md`).",
     ]
     text = "\n".join(lines)
-    with open(os.path.join(OUT, "tether_compare.md"), "w") as f:
+    with open(os.path.join(results_dir(), "tether_compare.md"), "w") as f:
         f.write(text + "\n")
     print(text)
 
@@ -402,7 +404,7 @@ def _figure(rows, lms, a, e1, aw):
     ax2.set_ylabel("(L_r - L_a)/L_r [%]")
     ax2.legend()
     ax2.grid(True, lw=0.3, alpha=0.5)
-    fig.savefig(os.path.join(OUT, "tether_compare.png"), dpi=110)
+    fig.savefig(os.path.join(results_dir(), "tether_compare.png"), dpi=110)
     plt.close(fig)
 
 

@@ -66,7 +66,7 @@ exact tether with the drag taken on MoorDyn's element tangent
 
 Run: ``python experiments/tether_moordyn.py [--quick]`` (quick: 11 s of the
 scenario, one repeat, the primary MoorDyn set-up only). Writes
-``results/tether_moordyn{,_quick}.{md,csv,png}``.
+``results/tether_moordyn.{md,csv,png}``.
 """
 
 import os
@@ -91,7 +91,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import new_figure, savefig, write_table
+from _common import new_figure, savefig, set_quick, write_table
 
 import jaxstring as js
 from jaxstring.tether.scenes import tether_fixed
@@ -484,6 +484,7 @@ def settled_force(ts, F, t=10.0, window=0.5):
 
 def main(quick=False, methods=None, repeats=None, variants=None):
     """Run the comparison; return (rows, data)."""
+    set_quick(quick)
     t1 = 11.0 if quick else 70.0
     ts = np.round(np.arange(0.0, t1 + 1e-9, DT_OUT), 10)
     repeats = repeats or (1 if quick else 3)

@@ -29,7 +29,7 @@ clearance > 0; |X| <= X_max, |N| <= N_max).
 
     python experiments/tune_tanker.py [--quick]
 
-Writes results/tune_tanker{,_quick}.{md,csv,png}.
+Writes results/tune_tanker.{md,csv,png}.
 """
 
 import os
@@ -250,6 +250,7 @@ def figure(trajs, d_ref, name):
 
 
 def main(quick=False):
+    C.set_quick(quick)
     sfx = "_quick" if quick else ""
     t_train = 300.0 if quick else 1000.0
     steps = 8 if quick else 80

@@ -83,6 +83,7 @@ def main(
     out_name="",
 ):
     """Run the work-precision study; return (rows, headline rows)."""
+    common.set_quick(quick)
     k = 8 if quick else 40
     t1 = 0.2 if quick else 2.0
     formulations = formulations or (("angle",) if quick else FORMULATIONS)
@@ -272,7 +273,12 @@ if __name__ == "__main__":
     p.add_argument("--solvers", default="")
     p.add_argument("--peers", default="")
     p.add_argument("--repeats", type=int, default=0)
-    p.add_argument("--name", default="", help="suffix of the result files")
+    p.add_argument(
+        "--name",
+        default="",
+        help="name of a variant study: files work_precision_<name>.* "
+        "(default: work_precision.*)",
+    )
     a = p.parse_args()
     main(
         quick=a.quick,

@@ -23,7 +23,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from _common import new_figure, savefig, write_table
+from _common import new_figure, savefig, set_quick, write_table
 
 
 _CHILD = r"""
@@ -88,6 +88,7 @@ def run(ks, ynn_on):
 
 
 def main(quick=False):
+    set_quick(quick)
     ks = (40, 160) if quick else (40, 160, 320, 640, 1280)
     rows = []
     for ynn_on in (True, False):

@@ -310,7 +310,7 @@ def test_refresh_before_predicted_divergence():
     # declaring divergence on that prediction (the old rule, with at most 3
     # Jacobians) failed the step, refreshing first lets it converge: about 2.8x
     # fewer step attempts (362 -> 130 here; k = 40, 2 s: 21k -> 8.9k accepted steps,
-    # bench_solvers_refresh.md), the same answer.
+    # docs, numerics), the same answer.
     scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
     runs = {
@@ -329,7 +329,7 @@ def test_stage_jacobians_cut_kvaerno5_attempts():
     # from it; on the displacement string at EA = 1e9 it is stale by then and the
     # step size is held down by Newton failures. jaxstring's Kvaerno5 takes it at
     # each stage's predictor: fewer attempts, the same answer (here 130 -> 30;
-    # k = 40, 2 s: 9757 -> 3797 attempts, bench_solvers_stagejac.md).
+    # k = 40, 2 s: 9757 -> 3797 attempts; docs, numerics).
     scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
     runs = {

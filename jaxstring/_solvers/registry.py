@@ -64,7 +64,7 @@ _MAX_ITERS_ADAPTIVE = 10
 # EA = 1e6 and 1e9. Taking the Jacobian at each stage's own predictor instead
 # (diffrax's `every_stage`, as for DIRK methods) costs one factorisation per stage
 # and converges from there: at EA = 1e9 Kvaerno5 went from 8930 accepted steps in
-# 6.0 s to 3471 in 1.63 s (0.80x CVODE; bench_solvers_stagejac.md); its step size
+# 6.0 s to 3471 in 1.63 s (0.80x CVODE; docs, numerics); its step size
 # had been held down by Newton failures. In natural variables, whose stiff force is
 # linear in the state, the step's Jacobian serves every stage and the extra ones
 # only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
