@@ -79,6 +79,7 @@ def test_covariance_is_the_gauss_newton_one_with_a_finite_difference_jacobian():
     assert res.std["alpha"] == pytest.approx(np.sqrt(cov[0, 0]), rel=1e-3)
 
 
+@pytest.mark.slow
 def test_two_experiments_share_the_parameters():
     starts = [_scene(EA=0.7e3, alpha=0.07), _scene(3 * np.pi / 8, EA=0.7e3, alpha=0.07)]
     residual = _TwoData(jnp.asarray(_data()), jnp.asarray(_data(3 * np.pi / 8)))
