@@ -25,6 +25,7 @@ if "xla_cpu_experimental_ynn_fusion_type" not in os.environ.get("XLA_FLAGS", "")
     except Exception:  # noqa: BLE001  (no jaxlib metadata: leave XLA's defaults)
         pass
 
+import contextlib
 import csv
 import dataclasses
 import datetime
@@ -283,18 +284,23 @@ def run_jaxstring(
     dt0=None,
     repeats=3,
     max_steps=MAX_STEPS,
+    label=None,
+    **options,
 ):
     """Time `jaxstring.simulate` (compile separate, median of repeats); return a row
-    dict with times, status, step counts and the end-mass trajectory (`end`)."""
+    dict with times, status, step counts (also as `steps`, `rejected`) and the
+    end-mass trajectory (`end`). `solver` is a name or a solver object (then
+    `label` names the row); `options` go to `simulate`."""
     import jaxstring
 
-    kw = {"rtol": rtol, "atol": atol, "ts": ts, "max_steps": max_steps}
+    kw = {"rtol": rtol, "atol": atol, "ts": ts, "max_steps": max_steps, **options}
     if newton_tol is not None:
         kw.update(newton_rtol=newton_tol, newton_atol=newton_tol)
-    adaptive = jaxstring.SOLVERS[solver][1]
+    # A solver object (a variant built by a benchmark) is taken as adaptive.
+    adaptive = jaxstring.SOLVERS[solver][1] if isinstance(solver, str) else True
     if dt0 is not None and not adaptive:
         kw["dt0"] = dt0
-    row = {"solver": solver, "adaptive": adaptive}
+    row = {"solver": label or solver, "adaptive": adaptive}
     try:
         tm, traj = timed(lambda: jaxstring.simulate(scene, solver, **kw), repeats)
     except Exception as e:  # a solver that cannot run is a result, not a crash
@@ -316,7 +322,24 @@ def run_jaxstring(
         end=np.asarray(traj.end_mass) if traj.ok else None,
         **stats_dict(traj),
     )
+    row.update(steps=row["num_accepted_steps"], rejected=row["num_rejected_steps"])
     return row
+
+
+def tight_reference(scene, ts, rtol=1e-10):
+    """End-mass trajectory of `scene` at `ts` from Rodas5P at rtol = atol = `rtol`
+    (printed with its wall time and steps)."""
+    import jaxstring
+
+    t0 = time.perf_counter()
+    ref = jaxstring.simulate(
+        scene, "rodas5p", rtol=rtol, atol=rtol, ts=ts, max_steps=4_000_000
+    )
+    print(
+        f"{scene.name}: reference Rodas5P {rtol:g} in {time.perf_counter() - t0:.1f}s"
+        f" ({int(ref.stats['num_accepted_steps'])} steps, {ref.status})"
+    )
+    return np.asarray(ref.end_mass)
 
 
 def run_peer(rhs, peer, jac, ts, *, rtol, atol, repeats=3):
@@ -340,4 +363,98 @@ def run_peer(rhs, peer, jac, ts, *, rtol, atol, repeats=3):
 
 
 def parse_list(text, conv=float):
-    return [conv(x) for x in text.split(",")] if text else None
+    """A comma-separated option: None when empty (the study's default), [] for
+    "none"."""
+    if not text:
+        return None
+    return [] if text == "none" else [conv(x) for x in text.split(",")]
+
+
+def run_study(main, doc, lists=None, **options):
+    """Parse a study script's command line and call `main` with it.
+
+    Every study takes ``--quick`` (small sizes, results under results/quick/) and
+    ``--repeats N`` (0: the study's default); `lists` maps main's keyword to the
+    type of a comma-separated option (``--EAs 1e4,1e6``; empty: the default);
+    `options` maps main's keyword to argparse keywords (``default``, ``type``,
+    ``help``, ``choices``; the flag is ``--keyword`` unless ``flag`` names it)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes")
+    parser.add_argument("--repeats", type=int, default=0, help="timing repeats")
+    for name in lists or {}:
+        parser.add_argument(f"--{name}", default="", help="comma-separated")
+    for name, kw in options.items():
+        kw = dict(kw)
+        parser.add_argument(f"--{kw.pop('flag', name)}", dest=name, **kw)
+    args = vars(parser.parse_args())
+    for name, conv in (lists or {}).items():
+        args[name] = parse_list(args[name], conv)
+    args["repeats"] = args["repeats"] or None
+    return main(**args)
+
+
+def score_rows(rows, ref_end, baseline=None, **fields):
+    """Add to each solver row its end-mass error against `ref_end` (`error_m`), its
+    run time over the `baseline` row's (`vs_cvode`; None without a baseline that
+    succeeded), the run time per attempted step (`us_per_attempt`) and `fields`;
+    print one line per row."""
+    base = baseline["run_s"] if baseline is not None and baseline["ok"] else None
+    for r in rows:
+        r.update(fields)
+        r["error_m"] = (
+            end_mass_error(r["end"], ref_end)
+            if r.get("end") is not None
+            else float("nan")
+        )
+        r["vs_cvode"] = (r["run_s"] / base) if (base and r.get("ok")) else None
+        if r.get("steps") is not None and r.get("ok"):
+            r["us_per_attempt"] = (
+                1e6 * r["run_s"] / max(r["steps"] + (r["rejected"] or 0), 1)
+            )
+        print(
+            f"  {r['solver']:34s} ok={r.get('ok')} run={fmt(r.get('run_s'))}s "
+            f"compile={fmt(r.get('compile_s'))}s steps={r.get('steps')} "
+            f"rej={r.get('rejected')} err={fmt(r['error_m'])} "
+            f"x CVODE={fmt(r['vs_cvode'])}",
+            flush=True,
+        )
+
+
+@contextlib.contextmanager
+def quiet_fd():
+    """Silence C/C++ console output (file descriptors 1 and 2), e.g. MoorDyn's."""
+    sys.stdout.flush()
+    saved = [os.dup(1), os.dup(2)]
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, null):
+            os.close(fd)
+
+
+def timed_wall_cpu(fn, repeats):
+    """Call `fn()` once (compile) and `repeats` times more; return (last result,
+    compile s, median wall s, median CPU s of this process, all threads). The CPU
+    time is the steadier measure on a shared machine."""
+    import jax
+
+    def call():
+        w, c = time.perf_counter(), time.process_time()
+        out = jax.block_until_ready(fn())
+        return out, time.perf_counter() - w, time.process_time() - c
+
+    out, first, _ = call()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        out, w, c = call()
+        walls.append(w)
+        cpus.append(c)
+    wall = statistics.median(walls)
+    return out, max(first - wall, 0.0), wall, statistics.median(cpus)

@@ -15,18 +15,9 @@ Run: ``python experiments/bench_bdf.py [--quick]`` (quick: k = 10, 0.5 s,
 EA in {1e4, 1e6}; about a minute).
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
 import importlib.util
-import sys
-import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import os
 
 import _common as common
 import jax.numpy as jnp
@@ -93,15 +84,7 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
     for EA in EAs:
         scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
         ts = jnp.linspace(0.0, t1, 201)
-        t0 = time.perf_counter()
-        ref = js.simulate(
-            scene, "rodas5p", rtol=1e-10, atol=1e-10, ts=ts, max_steps=4_000_000
-        )
-        ref_end = np.asarray(ref.end_mass)
-        print(
-            f"EA={EA:.0e}: reference Rodas5P 1e-10 in {time.perf_counter() - t0:.1f}s"
-            f" ({int(ref.stats['num_accepted_steps'])} steps, {ref.status})"
-        )
+        ref_end = common.tight_reference(scene, ts)
         block = []
         if have_cvode:
             block.append(run_cvode(scene, ts, rtol, atol, repeats))
@@ -109,49 +92,17 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
             block.append(run_solver(scene, name, ts, rtol, atol, repeats))
         if scipy_bdf:
             block.append(run_scipy_bdf(scene, ts, rtol, atol, 1 if EA > 1e7 else 2))
-        cv = block[0]["run_s"] if have_cvode and block[0]["ok"] else None
         bdf = next(r for r in block if r["solver"] == "bdf")
         for r in block:
-            r["EA"] = EA
-            r["error_m"] = (
-                common.end_mass_error(r["end"], ref_end)
-                if r.get("end") is not None
-                else float("nan")
-            )
-            r["vs_cvode"] = (r["run_s"] / cv) if (cv and r.get("ok")) else None
             r["vs_bdf"] = (
                 (r["run_s"] / bdf["run_s"]) if (bdf.get("ok") and r.get("ok")) else None
             )
-            if r.get("steps") is not None and r.get("ok"):
-                r["us_per_attempt"] = (
-                    1e6 * r["run_s"] / max(r["steps"] + (r["rejected"] or 0), 1)
-                )
-            print(
-                f"  {r['solver']:34s} ok={r.get('ok')} "
-                f"run={common.fmt(r.get('run_s'))}s "
-                f"compile={common.fmt(r.get('compile_s'))}s steps={r.get('steps')} "
-                f"rej={r.get('rejected')} err={common.fmt(r['error_m'])} "
-                f"x CVODE={common.fmt(r['vs_cvode'])}",
-                flush=True,
-            )
+        common.score_rows(block, ref_end, block[0] if have_cvode else None, EA=EA)
         rows.extend(block)
-    cols = [
-        "EA",
-        "solver",
-        "ok",
-        "run_s",
-        "compile_s",
-        "repeats",
-        "steps",
-        "rejected",
-        "us_per_attempt",
-        "nfev",
-        "njev",
-        "error_m",
-        "vs_cvode",
-        "vs_bdf",
-        "status",
-    ]
+    cols = (
+        "EA solver ok run_s compile_s repeats steps rejected us_per_attempt nfev "
+        "njev error_m vs_cvode vs_bdf status"
+    ).split()
     notes = [
         f"String pendulum, displacement variables, k = {k}, alpha = 0.01, {t1} s, "
         "rtol = atol = 1e-6.",

@@ -20,19 +20,11 @@ Run: ``python experiments/bench_solvers.py [--quick]`` (quick: k = 10, 0.5 s, EA
 {1e4, 1e6}, k = 10 ... 40; a smoke test, about a minute).
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
 import importlib.util
 import math
-import sys
+import os
 import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _common as common
 import diffrax as dfx
@@ -74,30 +66,20 @@ def _solver(name, rtol, atol):
 
 
 def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
-    solver = _solver(name, rtol, atol)
-    kw = dict(rtol=rtol, atol=atol, ts=ts, max_steps=max_steps)
-    if name in FIXED:
-        kw["dt0"] = 0.005
-    if name.endswith("-pid"):
-        # diffrax's plain PIDController (before NewtonLimitedController)
-        kw["step_control"] = "pid"
-    row = {"solver": name}
-    try:
-        tm, traj = common.timed(lambda: js.simulate(scene, solver, **kw), repeats)
-    except Exception as e:  # a solver that cannot run is a result, not a crash
-        row.update(ok=False, status=f"{type(e).__name__}: {e}"[:100], end=None)
-        return row
-    row.update(
-        ok=traj.ok,
-        status=traj.status,
-        compile_s=tm.compile_s,
-        run_s=tm.run_s,
-        repeats=tm.n,
-        steps=int(traj.stats["num_accepted_steps"]),
-        rejected=int(traj.stats["num_rejected_steps"]),
-        end=np.asarray(traj.end_mass),
+    # "-pid": diffrax's plain PIDController (before NewtonLimitedController)
+    extra = {"step_control": "pid"} if name.endswith("-pid") else {}
+    return common.run_jaxstring(
+        scene,
+        _solver(name, rtol, atol),
+        ts,
+        rtol=rtol,
+        atol=atol,
+        dt0=0.005,
+        repeats=repeats,
+        max_steps=max_steps,
+        label=name,
+        **extra,
     )
-    return row
 
 
 def run_cvode(scene, ts, rtol, atol, repeats):
@@ -200,56 +182,20 @@ def main(
     for EA in EAs if table1 else ():
         scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
         ts = jnp.linspace(0.0, t1, 201)
-        t0 = time.perf_counter()
-        ref = js.simulate(
-            scene, "rodas5p", rtol=1e-10, atol=1e-10, ts=ts, max_steps=4_000_000
-        )
-        ref_end = np.asarray(ref.end_mass)
-        print(
-            f"EA={EA:.0e}: reference Rodas5P 1e-10 in {time.perf_counter() - t0:.1f}s"
-            f" ({int(ref.stats['num_accepted_steps'])} steps, {ref.status})"
-        )
+        ref_end = common.tight_reference(scene, ts)
         block_rows = []
         if have_cvode:
             block_rows.append(run_cvode(scene, ts, rtol, atol, repeats))
         for name in names:
             block_rows.append(run_solver(scene, name, ts, rtol, atol, repeats))
-        cv = block_rows[0]["run_s"] if have_cvode and block_rows[0]["ok"] else None
-        for r in block_rows:
-            r["EA"] = EA
-            r["error_m"] = (
-                common.end_mass_error(r["end"], ref_end)
-                if r.get("end") is not None
-                else float("nan")
-            )
-            r["vs_cvode"] = (r["run_s"] / cv) if (cv and r.get("ok")) else None
-            if r.get("steps") is not None and r.get("ok"):
-                r["us_per_attempt"] = (
-                    1e6 * r["run_s"] / max(r["steps"] + r["rejected"], 1)
-                )
-            print(
-                f"  {r['solver']:32s} ok={r.get('ok')} "
-                f"run={common.fmt(r.get('run_s'))}s "
-                f"compile={common.fmt(r.get('compile_s'))}s steps={r.get('steps')} "
-                f"rej={r.get('rejected')} err={common.fmt(r['error_m'])} "
-                f"x CVODE={common.fmt(r['vs_cvode'])}",
-                flush=True,
-            )
+        common.score_rows(
+            block_rows, ref_end, block_rows[0] if have_cvode else None, EA=EA
+        )
         rows.extend(block_rows)
-    cols = [
-        "EA",
-        "solver",
-        "ok",
-        "run_s",
-        "compile_s",
-        "repeats",
-        "steps",
-        "rejected",
-        "us_per_attempt",
-        "error_m",
-        "vs_cvode",
-        "status",
-    ]
+    cols = (
+        "EA solver ok run_s compile_s repeats steps rejected us_per_attempt "
+        "error_m vs_cvode status"
+    ).split()
     notes = [
         f"String pendulum, displacement variables, k = {k}, alpha = 0.01, "
         f"{t1} s, rtol = atol = 1e-6; fixed-step solvers at dt = 0.005 s.",

@@ -22,9 +22,6 @@ import os
 import subprocess
 import sys
 
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
 from _common import new_figure, savefig, set_quick, write_table
 
 
@@ -110,15 +107,10 @@ def main(quick=False):
     write_table(
         f"blas_threads{tag}",
         rows,
-        [
-            "config",
-            "env",
-            "blas_threads_live",
-            "scipy_lu_ms",
-            "jax_lu_ms",
-            "scipy_vs_1thread",
-            "jax_vs_1thread",
-        ],
+        (
+            "config env blas_threads_live scipy_lu_ms jax_lu_ms scipy_vs_1thread "
+            "jax_vs_1thread"
+        ).split(),
         f"{N} x {N} LU factorisation vs OpenBLAS threads (median of {reps})",
         notes=[
             "Each row is its own process (OpenBLAS reads its thread count on load).",

@@ -27,8 +27,6 @@ import sys
 import time
 
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
 SOLVERS = ("rodas5p", "kvaerno5", "kvaerno3", "bdf")
 
 
@@ -93,18 +91,10 @@ def main(quick=False):
     write_table(
         "compile_time" + ("_quick" if quick else ""),
         rows,
-        [
-            "solver",
-            "band",
-            "compile_s",
-            "first_call_s",
-            "first_call_cpu_s",
-            "run_s",
-            "other_values_s",
-            "recompiled",
-            "ok",
-            "steps",
-        ],
+        (
+            "solver band compile_s first_call_s first_call_cpu_s run_s "
+            "other_values_s recompiled ok steps"
+        ).split(),
         f"Compile time of simulate: string pendulum, displacement, k = {k}, "
         "EA = 1e6 N, 2 s, rtol = atol = 1e-6",
         [

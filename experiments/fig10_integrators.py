@@ -11,18 +11,8 @@ a second table says where jaxstring's implicit time goes (Jacobians, LU, Newton)
 Run: ``python experiments/fig10_integrators.py [--quick]``.
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
 import math
-import sys
 import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _common as common
 import jax
@@ -255,21 +245,10 @@ def main(
     for r in rows:
         r["cpu_rel"] = r["run_s"] / base if r.get("ok") else math.nan
     tag = "_quick" if quick else ""
-    cols = [
-        "EA",
-        "solver",
-        "ok",
-        "run_s",
-        "repeats",
-        "compile_s",
-        "cpu_rel",
-        "err_m",
-        "num_steps",
-        "num_rejected_steps",
-        "nfev",
-        "njev",
-        "status",
-    ]
+    cols = (
+        "EA solver ok run_s repeats compile_s cpu_rel err_m num_steps "
+        "num_rejected_steps nfev njev status"
+    ).split()
     common.write_table(
         f"fig10_integrators{tag}",
         rows,
@@ -354,19 +333,9 @@ def _plot(rows, EAs, formulation, k, tag):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--formulation", default="angle")
-    p.add_argument("--EAs", default="")
-    p.add_argument("--solvers", default="")
-    p.add_argument("--jacs", default="")
-    p.add_argument("--repeats", type=int, default=0)
-    a = p.parse_args()
-    main(
-        quick=a.quick,
-        formulation=a.formulation,
-        EAs=common.parse_list(a.EAs),
-        solvers=common.parse_list(a.solvers, str),
-        jacs=common.parse_list(a.jacs, str),
-        repeats=a.repeats or None,
+    common.run_study(
+        main,
+        __doc__,
+        lists={"EAs": float, "solvers": str, "jacs": str},
+        formulation=dict(default="angle"),
     )

@@ -9,17 +9,7 @@ fastest run at EA = 1e4. Settings: k = 40, 2 s, rtol = atol = 1e-7.
 Run: ``python experiments/fig9_formulations.py [--quick]``.
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
 import math
-import sys
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _common as common
 import numpy as np
@@ -129,21 +119,10 @@ def main(
     common.write_table(
         f"fig9_formulations{tag}",
         rows,
-        [
-            "formulation",
-            "EA",
-            "solver",
-            "best",
-            "ok",
-            "run_s",
-            "repeats",
-            "compile_s",
-            "cpu_rel",
-            "err_m",
-            "num_steps",
-            "num_rejected_steps",
-            "status",
-        ],
+        (
+            "formulation EA solver best ok run_s repeats compile_s cpu_rel err_m "
+            "num_steps num_rejected_steps status"
+        ).split(),
         f"Fig 9: wall time vs EA per formulation, k={k}, t1={t1} s, rtol=atol={tol:g}",
         notes=[
             "best: the jaxstring solver with the smallest total time over all EAs for "
@@ -182,17 +161,6 @@ def main(
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--formulations", default="")
-    p.add_argument("--EAs", default="")
-    p.add_argument("--solvers", default="")
-    p.add_argument("--repeats", type=int, default=0)
-    a = p.parse_args()
-    main(
-        quick=a.quick,
-        formulations=common.parse_list(a.formulations, str),
-        EAs=common.parse_list(a.EAs),
-        solvers=common.parse_list(a.solvers, str),
-        repeats=a.repeats or None,
+    common.run_study(
+        main, __doc__, lists={"formulations": str, "EAs": float, "solvers": str}
     )

@@ -70,7 +70,9 @@ def fit(data, ts):
         ts=ts,
         rtol=1e-6,
         atol=1e-6,
-        tol=1e-6,
+        # LM stops when log p changes by less than 1e-5 between steps: a
+        # thousandth of the noise's standard deviation of the estimates.
+        tol=1e-5,
     )
     return res, time.perf_counter() - t0
 
@@ -123,9 +125,10 @@ def adam_comparison(ts, steps=300):
             "Target: alpha and EA within one reported standard deviation of the "
             "Levenberg-Marquardt estimate (seed 0 of identify_least_squares). Adam: "
             "learning rate 0.05 on log p, one forward and one reverse solve per step; "
-            "LM: one forward solve with two JVPs per iteration, plus the start, the "
-            "optimum and its Jacobian. Same data and solver settings (Kvaerno5, "
-            "rtol = atol = 1e-6). Wall times include compilation.",
+            "LM: one forward solve with two JVPs per iteration, plus the start "
+            "and the optimum with its Jacobian (one solve with the JVPs). Same "
+            "data and solver settings (Kvaerno5, rtol = atol = 1e-6). Wall times "
+            "include compilation.",
             "solves_ratio: Adam's solves over LM's (a lower bound where Adam did not "
             "get there within its step budget).",
         ],
@@ -175,7 +178,8 @@ def main(quick=False):
         f"Data: independent NumPy/scipy Radau implementation, k = {K}, EA = {EA:g} N, "
         f"alpha = {ALPHA} s, {T1} s, {N_SAMPLES} samples, noise {NOISE * 1e3} mm.",
         f"Start 40 % off: alpha = {START['alpha']}, EA = {START['EA']:g}; "
-        "Kvaerno5 at rtol = atol = 1e-6, forward-mode Jacobians; LM tolerance 1e-6.",
+        "Kvaerno5 at rtol = atol = 1e-6, forward-mode Jacobians; LM tolerance 1e-5 "
+        "on log p (the estimates' noise std is about 5e-3 in log p).",
         f"First fit (seed 0) wall time including compilation: "
         f"{rows[0]['wall_s']:.1f} s; later fits (compiled): median {later:.1f} s.",
         f"Scatter of the estimates over {n_seeds} seeds: alpha {scatter_a:.3g} s, "

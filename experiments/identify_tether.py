@@ -32,18 +32,13 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import sys
 import time
 
+import _common as C
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optax
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-import _common as C
 
 import jaxstring as js
 from jaxstring import _fit

@@ -18,22 +18,11 @@ Run: ``python experiments/moordyn_pendulum.py [--quick]``. Needs the ``moordyn``
 package (optional ``bench`` extra); without it only the jaxstring side runs.
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
-import contextlib
 import importlib.util
 import math
-import sys
+import os
 import tempfile
 import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
 from typing import ClassVar
 
 import _common as common
@@ -104,23 +93,6 @@ class EndWeight(jaxstring.AbstractStringLoad):
         return jaxstring.Loads(line=jnp.zeros_like(kin.positions), end=end)
 
 
-@contextlib.contextmanager
-def _quiet_fd():
-    """Silence MoorDyn's C++ progress output (file descriptors 1 and 2)."""
-    sys.stdout.flush()
-    saved = [os.dup(1), os.dup(2)]
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, null):
-            os.close(fd)
-
-
 def run_moordyn(ts, cfl=0.1, quick=False, workdir=None):
     """Run MoorDyn; return dict with init_s, run_s, end (T, 2) in (x, z), nodes0."""
     import moordyn
@@ -137,7 +109,7 @@ def run_moordyn(ts, cfl=0.1, quick=False, workdir=None):
                 TmaxIC=20.0 if quick else 10000.0,
             )
         )
-    with _quiet_fd():
+    with common.quiet_fd():
         t0 = time.perf_counter()
         system = moordyn.Create(path)
         moordyn.Init(system, [], [])
@@ -275,17 +247,10 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
     common.write_table(
         f"moordyn_pendulum{tag}",
         rows,
-        [
-            "code",
-            "ok",
-            "setup_s",
-            "run_s",
-            "repeats",
-            "steps",
-            "err_vs_tight_m",
-            "diff_vs_moordyn_m",
-            "x_end_m",
-        ],
+        (
+            "code ok setup_s run_s repeats steps err_vs_tight_m diff_vs_moordyn_m "
+            "x_end_m"
+        ).split(),
         f"MoorDyn test-suite pendulum: {LINE['l']} m, {LINE['segments']} segments, "
         f"EA={LINE['EA']:g} N, {LINE['w']} kg/m, end mass {LINE['m_point']:g} kg, "
         f"{t1} s",
@@ -323,8 +288,4 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--repeats", type=int, default=0)
-    a = p.parse_args()
-    main(quick=a.quick, repeats=a.repeats or None)
+    common.run_study(main, __doc__)

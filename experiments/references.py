@@ -381,16 +381,7 @@ def main(
     write_table(
         "references_quick" if quick else "references",
         rows,
-        [
-            "peer",
-            "jac",
-            "ok",
-            "compile_s",
-            "run_s",
-            "nfev",
-            "njev",
-            "err_vs_kvaerno5_m",
-        ],
+        "peer jac ok compile_s run_s nfev njev err_vs_kvaerno5_m".split(),
         f"External references on the identical RHS: {formulation}, k={k}, EA={EA:g}, "
         f"rtol=atol={rtol:g}",
         notes=[

@@ -25,18 +25,8 @@ Run: ``python experiments/scaling_k.py [--quick] [--formulation displacement]
 re-time the jaxstring runs in interleaved rounds, see ``main``).
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
 import math
-import sys
 import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _common as common
 import jax
@@ -191,21 +181,10 @@ def main(
     common.write_table(
         f"scaling_k{tag}",
         rows,
-        [
-            "k",
-            "n_states",
-            "solver",
-            "ok",
-            "run_s",
-            "repeats",
-            "compile_s",
-            "num_steps",
-            "num_rejected_steps",
-            "nfev",
-            "njev",
-            "diff_m",
-            "status",
-        ],
+        (
+            "k n_states solver ok run_s repeats compile_s num_steps "
+            "num_rejected_steps nfev njev diff_m status"
+        ).split(),
         f"Wall time vs k, {formulation}, {start} start, EA={EA:g}, t1={t1} s, "
         f"rtol=atol={tol:g}",
         notes=[
@@ -222,14 +201,7 @@ def main(
     common.write_table(
         f"scaling_k_exponents{tag}",
         exps,
-        [
-            "solver",
-            "best",
-            "k_range",
-            "exponent",
-            "exponent_upper_half",
-            "steps_exponent",
-        ],
+        "solver best k_range exponent exponent_upper_half steps_exponent".split(),
         f"Fitted exponent p of wall time ~ k^p (the paper: about 2), start={start}",
         notes=[
             "steps_exponent: the same fit of the accepted step count; the rest of "
@@ -265,40 +237,19 @@ def main(
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--formulation", default="angle")
-    p.add_argument("--ks", default="")
-    p.add_argument("--solvers", default="")
-    p.add_argument("--repeats", type=int, default=0)
-    p.add_argument(
-        "--name",
-        default="",
-        help="name of a variant study: files scaling_k_<name>.* (default: scaling_k.*)",
-    )
-    p.add_argument("--start", default="release", choices=("release", "swing"))
-    p.add_argument(
-        "--peers", default=None, help="comma list of cvode-BDF, scipy-Radau; 'none'"
-    )
-    p.add_argument("--budget", type=float, default=90.0)
-    p.add_argument("--tol", type=float, default=1e-7, help="rtol = atol")
-    p.add_argument(
-        "--rounds", type=int, default=0, help="re-time in interleaved rounds (main doc)"
-    )
-    a = p.parse_args()
-    peers = None
-    if a.peers is not None:
-        peers = [] if a.peers == "none" else common.parse_list(a.peers, str)
-    main(
-        quick=a.quick,
-        formulation=a.formulation,
-        ks=common.parse_list(a.ks, int),
-        solvers=common.parse_list(a.solvers, str),
-        repeats=a.repeats or None,
-        out_name=a.name,
-        start=a.start,
-        peers=peers,
-        budget_s=a.budget,
-        rounds=a.rounds,
-        tol=a.tol,
+    common.run_study(
+        main,
+        __doc__,
+        lists={"ks": int, "solvers": str, "peers": str},
+        formulation=dict(default="angle"),
+        out_name=dict(
+            flag="name",
+            default="",
+            help="name of a variant study: files scaling_k_<name>.* (default: "
+            "scaling_k.*)",
+        ),
+        start=dict(default="release", choices=("release", "swing")),
+        budget_s=dict(flag="budget", type=float, default=90.0),
+        tol=dict(type=float, default=1e-7, help="rtol = atol"),
+        rounds=dict(type=int, default=0, help="re-time in interleaved rounds"),
     )

@@ -16,12 +16,7 @@ Run: ``python experiments/step_cost.py [--quick]``.
 """
 
 import argparse
-import os
-import sys
 import time
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import diffrax as dfx
 import equinox as eqx

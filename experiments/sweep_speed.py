@@ -367,24 +367,11 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
                 flush=True,
             )
     load1 = os.getloadavg()
-    cols = [
-        "case",
-        "variant",
-        "steps",
-        "same_steps_as_loop",
-        "wall_s",
-        "cpu_s",
-        "speedup_wall",
-        "speedup_cpu",
-        "range_wall",
-        "range_cpu",
-        "compile_s",
-        "rounds",
-        "diff_vs_loop",
-        "err_vs_ref",
-        "all_ok",
-        "meets_goal",
-    ]
+    cols = (
+        "case variant steps same_steps_as_loop wall_s cpu_s speedup_wall "
+        "speedup_cpu range_wall range_cpu compile_s rounds diff_vs_loop "
+        "err_vs_ref all_ok meets_goal"
+    ).split()
     load = (
         f"load average (1, 5, 15 min) at start {load0[0]:.1f}, {load0[1]:.1f}, "
         f"{load0[2]:.1f}; at end {load1[0]:.1f}, {load1[1]:.1f}, {load1[2]:.1f} "

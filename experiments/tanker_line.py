@@ -150,14 +150,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
 
     sfx = "_quick" if quick else ""
     base_run = rows_f[0]["run_s"]
-    keys = [
-        "period",
-        "shuttle_yaw",
-        "fpso_yaw",
-        "lateral_excursion",
-        "span_min",
-        "tension_max",
-    ]
+    keys = "period shuttle_yaw fpso_yaw lateral_excursion span_min tension_max".split()
     with open(os.path.join(results_dir(), f"tanker_line{sfx}.csv"), "w") as f:
         f.write(
             "hawser,N,solver,tol,status,steps,compile_s,run_s,cpu_s,"

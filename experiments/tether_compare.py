@@ -21,21 +21,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import csv
-import math
-import statistics
-import time
 
-import jax
+import _common as common
 import jax.numpy as jnp
 import numpy as np
 from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 import jaxstring.tether.plot as tplot
-from jaxstring._environment import Environment
-from jaxstring._scene import Scene
-from jaxstring.tether.effects import Buoyancy, Drag, Weight
-from jaxstring.tether.models import AceamTether, ExactTether, FixedEnd
 from jaxstring.tether.scenes import tether_fixed, tether_winch
 
 
@@ -44,28 +37,14 @@ K_ACEAM = 1e4
 
 
 def timed(scene, repeats, rtol=1e-6):
-    """(trajectory, compile s, median wall s, median CPU s) of a dopri5 solve.
-
-    The CPU time of this process (all threads) is the steadier measure on a shared
-    machine; ratios are taken from it."""
-
-    def call():
-        w, c = time.perf_counter(), time.process_time()
-        traj = jax.block_until_ready(
-            js.simulate(
-                scene, "dopri5", rtol=rtol, atol=rtol, ts=TS, max_steps=2_000_000
-            )
-        )
-        return traj, time.perf_counter() - w, time.process_time() - c
-
-    traj, first, _ = call()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        traj, w, c = call()
-        walls.append(w)
-        cpus.append(c)
-    wall = statistics.median(walls)
-    return traj, max(first - wall, 0.0), wall, statistics.median(cpus)
+    """(trajectory, compile s, median wall s, median CPU s) of a dopri5 solve;
+    ratios are taken from the CPU time (the steadier measure on a shared machine)."""
+    return common.timed_wall_cpu(
+        lambda: js.simulate(
+            scene, "dopri5", rtol=rtol, atol=rtol, ts=TS, max_steps=2_000_000
+        ),
+        repeats,
+    )
 
 
 def summary(label, traj, compile_s, run_s, cpu_s):
@@ -118,26 +97,8 @@ def k_for_error(ks, errs, target):
     return float(ks[i] * errs[i] / target)
 
 
-def v_release(method, interior_deg, N=11, L=10.0):
-    n_links = N + 1
-    half = math.radians(interior_deg) / 2
-    k = n_links // 2
-    left = np.array([math.sin(half), 0.0, -math.cos(half)])
-    right = np.array([math.sin(half), 0.0, math.cos(half)])
-    pts = np.cumsum(np.array([left] * k + [right] * (n_links - k)) * L / n_links, 0)
-    cls = AceamTether if method == "aceam" else ExactTether
-    model = cls(
-        L=L,
-        d=0.01,
-        mass_per_length=0.5,
-        N=N,
-        root=FixedEnd(jnp.zeros(3)),
-        fast=FixedEnd(jnp.asarray(pts[-1])),
-    )
-    y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
-    env = Environment(rho_water=1024.0)  # the paper's water (Table 1)
-    effects = (Weight(), Buoyancy(), Drag())
-    scene = Scene(model=model, effects=effects, y0=y0, t1=1.0, env=env)
+def v_release(method, interior_deg):
+    scene = js.tether.tether_fold(method, interior_deg)
     return js.simulate(
         scene, "dopri5", rtol=1e-8, atol=1e-8, ts=jnp.linspace(0.0, 1.0, 101)
     )

@@ -75,20 +75,15 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import contextlib
 import importlib.util
 import math
 import statistics
 import struct
-import sys
 import tempfile
 import time
 
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
+import _common as common
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from _common import new_figure, savefig, set_quick, write_table
@@ -152,23 +147,6 @@ z (m), ux (m/s), uy (m/s), uz (m/s)
 {zlo} {u[0]!r} {u[1]!r} {u[2]!r}
 0.0 {u[0]!r} {u[1]!r} {u[2]!r}
 """
-
-
-@contextlib.contextmanager
-def _quiet_fd():
-    """Silence MoorDyn's C++ console output (file descriptors 1 and 2)."""
-    sys.stdout.flush()
-    saved = [os.dup(1), os.dup(2)]
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, null):
-            os.close(fd)
 
 
 def line_properties(scene):
@@ -295,7 +273,7 @@ def check_axial_drag(workdir, props, segments=102, EA=1e7, cfl=CFL):
     rb = (p["L"], 0.0, DEPTH_SHIFT)  # straight along x: the current is axial
     path = moordyn_input(workdir, p, segments, EA, cfl, ra=ra, rb=rb)
     x = [*ra, *rb]
-    with _quiet_fd():
+    with common.quiet_fd():
         system = moordyn.Create(path)
         moordyn.Init_NoIC(system, x, [0.0] * 6)
         moordyn.Step(system, x, [0.0] * 6, 0.0, 1e-6)
@@ -333,7 +311,7 @@ def run_moordyn(scene, nodes0, t_out, segments, EA, cfl=CFL, workdir=None):
 
     root = np.array([0.0, 0.0, DEPTH_SHIFT])
     dtc = float(t_out[1] - t_out[0])
-    with _quiet_fd():
+    with common.quiet_fd():
         t0 = time.perf_counter()
         system = moordyn.Create(path)
         moordyn.Init_NoIC(system, [*root, *ends(t_out[0])], [0.0] * 6)
@@ -427,29 +405,19 @@ def run_jaxstring(method, ts, repeats):
     """Compile, then time `repeats` dopri5 runs; return a dict like run_moordyn's."""
     scene = jaxstring_scene(method, float(ts[-1]))
 
-    def call():
-        w, c = time.perf_counter(), time.process_time()
-        traj = jax.block_until_ready(
-            js.simulate(
-                scene, "dopri5", rtol=RTOL, atol=RTOL, ts=ts, max_steps=2_000_000
-            )
-        )
-        return traj, time.perf_counter() - w, time.process_time() - c
-
-    traj, first, _ = call()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        traj, w, c = call()
-        walls.append(w)
-        cpus.append(c)
-    run = statistics.median(walls)
+    traj, compile_s, run, cpu = common.timed_wall_cpu(
+        lambda: js.simulate(
+            scene, "dopri5", rtol=RTOL, atol=RTOL, ts=ts, max_steps=2_000_000
+        ),
+        repeats,
+    )
     return {
         "scene": scene,
         "ok": traj.ok,
         "steps": int(traj.stats["num_steps"]),
-        "compile_s": max(first - run, 0.0),
+        "compile_s": compile_s,
         "run_s": run,
-        "cpu_s": statistics.median(cpus),
+        "cpu_s": cpu,
         "repeats": repeats,
         "root_force": np.asarray(traj.root_force),
         "fast_force": np.asarray(traj.fast_force),
@@ -552,26 +520,12 @@ def main(quick=False, methods=None, repeats=None, variants=None):
                 row[f"shape_{t:g}s_m"] = shape_distance(r["nodes"][i], ref["nodes"][i])
         rows.append(row)
     tag = "_quick" if quick else ""
-    cols = [
-        "code",
-        "ok",
-        "setup_s",
-        "run_s",
-        "cpu_s",
-        "repeats",
-        "time_vs_md",
-        "dtM_s",
-        "steps",
-        "max_abs_length_error",
-        "root_F10_N",
-        "fast_F10_N",
-        "root_dF_rel",
-        "fast_dF_rel",
-        "root_dF_rel_smooth",
-        "fast_dF_rel_smooth",
-        "root_dF_rel_median",
-        "fast_dF_rel_median",
-    ] + [f"shape_{t:g}s_m" for t in shape_ts]
+    cols = (
+        "code ok setup_s run_s cpu_s repeats time_vs_md dtM_s steps "
+        "max_abs_length_error root_F10_N fast_F10_N root_dF_rel fast_dF_rel "
+        "root_dF_rel_smooth fast_dF_rel_smooth root_dF_rel_median "
+        "fast_dF_rel_median"
+    ).split() + [f"shape_{t:g}s_m" for t in shape_ts]
     write_table(
         f"tether_moordyn{tag}",
         rows,

@@ -38,9 +38,9 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import sys
 import time
 
+import _common as C
 import diffrax as dfx
 import equinox as eqx
 import jax
@@ -48,11 +48,6 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 import optax
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-import _common as C
 
 import jaxstring as js
 from jaxstring import _fit
@@ -312,25 +307,11 @@ def main(quick=False):
         "cost terms c_*: time means of each part of l(t); train_cost: the cost on the "
         "training window",
     ]
-    cols = [
-        "env",
-        "gains",
-        "train_cost",
-        "cost",
-        "c_span",
-        "c_heading",
-        "c_effort",
-        "c_collision",
-        "span_err_m",
-        "heading_err_deg",
-        "span_min_m",
-        "clearance_min_m",
-        "X_peak_kN",
-        "N_peak_MNm",
-        "ok",
-        "run_s",
-        "compile_s",
-    ]
+    cols = (
+        "env gains train_cost cost c_span c_heading c_effort c_collision "
+        "span_err_m heading_err_deg span_min_m clearance_min_m X_peak_kN "
+        "N_peak_MNm ok run_s compile_s"
+    ).split()
     C.write_table(
         f"tune_tanker{sfx}",
         rows,

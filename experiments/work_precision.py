@@ -14,17 +14,7 @@ and ratios jaxstring / CVODE / Radau in the same run) and the suggested presets.
 Run: ``python experiments/work_precision.py [--quick]``.
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
 import math
-import sys
-
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _common as common
 import numpy as np
@@ -142,22 +132,10 @@ def main(
     common.write_table(
         f"work_precision{tag}",
         rows,
-        [
-            "formulation",
-            "EA",
-            "solver",
-            "tol",
-            "ok",
-            "err_m",
-            "run_s",
-            "repeats",
-            "compile_s",
-            "num_steps",
-            "num_rejected_steps",
-            "nfev",
-            "njev",
-            "status",
-        ],
+        (
+            "formulation EA solver tol ok err_m run_s repeats compile_s num_steps "
+            "num_rejected_steps nfev njev status"
+        ).split(),
         f"Work-precision: end-mass error vs wall time, k={k}, t1={t1} s",
         notes=[
             f"err_m: max end-mass distance (m) over 41 save times vs a reference at "
@@ -172,19 +150,11 @@ def main(
     common.write_table(
         f"work_precision_headline{tag}",
         head,
-        [
-            "formulation",
-            "EA",
-            "target_m",
-            "best_jaxstring",
-            "t_jaxstring_s",
-            "t_cvode_s",
-            "t_radau_s",
-            "t_best_peer_s",
-            "best_peer",
-            "ratio_js_over_cvode",
-            "ratio_js_over_radau",
-        ],
+        (
+            "formulation EA target_m best_jaxstring t_jaxstring_s t_cvode_s "
+            "t_radau_s t_best_peer_s best_peer ratio_js_over_cvode "
+            "ratio_js_over_radau"
+        ).split(),
         "Time to reach an end-mass accuracy (min over tolerances), same run",
         notes=["ratio < 1: jaxstring faster. nan: no run reached the target."],
     )
@@ -265,28 +235,20 @@ def _plot(rows, formulations, EAs, tag):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--formulations", default="")
-    p.add_argument("--EAs", default="")
-    p.add_argument("--tols", default="")
-    p.add_argument("--solvers", default="")
-    p.add_argument("--peers", default="")
-    p.add_argument("--repeats", type=int, default=0)
-    p.add_argument(
-        "--name",
-        default="",
-        help="name of a variant study: files work_precision_<name>.* "
-        "(default: work_precision.*)",
-    )
-    a = p.parse_args()
-    main(
-        quick=a.quick,
-        formulations=common.parse_list(a.formulations, str),
-        EAs=common.parse_list(a.EAs),
-        tols=common.parse_list(a.tols),
-        solvers=common.parse_list(a.solvers, str),
-        peers=common.parse_list(a.peers, str),
-        repeats=a.repeats or None,
-        out_name=a.name,
+    common.run_study(
+        main,
+        __doc__,
+        lists={
+            "formulations": str,
+            "EAs": float,
+            "tols": float,
+            "solvers": str,
+            "peers": str,
+        },
+        out_name=dict(
+            flag="name",
+            default="",
+            help="name of a variant study: files work_precision_<name>.* "
+            "(default: work_precision.*)",
+        ),
     )

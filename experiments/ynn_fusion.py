@@ -20,9 +20,6 @@ import os
 import subprocess
 import sys
 
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
 from _common import new_figure, savefig, set_quick, write_table
 
 
@@ -125,18 +122,10 @@ def main(quick=False):
     write_table(
         name,
         rows,
-        [
-            "k",
-            "ynn_fusions",
-            "rhs_us",
-            "jacobian_us",
-            "factor_full_us",
-            "factor_reduced_us",
-            "solve_full_us",
-            "solve_reduced_us",
-            "step_full_us",
-            "step_reduced_us",
-        ],
+        (
+            "k ynn_fusions rhs_us jacobian_us factor_full_us factor_reduced_us "
+            "solve_full_us solve_reduced_us step_full_us step_reduced_us"
+        ).split(),
         "Newton-matrix pieces vs k: YNNPACK fusions, full vs reduced factorisation",
         notes,
     )

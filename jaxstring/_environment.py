@@ -13,7 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._validate import check_finite, check_nonnegative, check_positive, is_concrete
+from ._validate import (
+    check_fields,
+    check_finite,
+    is_concrete,
+)
 
 
 def _f64(x):
@@ -145,10 +149,11 @@ class Environment(eqx.Module):
     wind: AbstractFlow | None = None
 
     def __check_init__(self):
-        check_nonnegative("g", self.g, "m/s^2")
-        check_positive("rho_water", self.rho_water, "kg/m^3")
-        check_positive("rho_air", self.rho_air, "kg/m^3")
-        check_positive("nu_water", self.nu_water, "m^2/s")
+        check_fields(
+            self,
+            positive={"rho_water": "kg/m^3", "rho_air": "kg/m^3", "nu_water": "m^2/s"},
+            nonnegative={"g": "m/s^2"},
+        )
         for name in ("current", "wind"):
             field = getattr(self, name)
             if field is not None and not isinstance(field, AbstractFlow):

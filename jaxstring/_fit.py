@@ -235,14 +235,10 @@ def _count_steps(scene, config, ts) -> int:
     return int(traj.stats["num_steps"])
 
 
-def _setup(
-    scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solver_kw
-):
-    """Check the arguments of `fit`/`value_and_grad`; split the scene."""
-    if not isinstance(scene, Scene):
-        raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
-    if not callable(loss_fn):
-        raise ValueError("`loss_fn` must be callable: loss_fn(traj, scene) -> scalar.")
+def resolve_params(scene, params, positive):
+    """Getters of the named parameters (`resolve` each) and one `positive` flag
+    per parameter; ValueError for none, a leaf named twice or a `positive` of
+    the wrong length."""
     if isinstance(params, str) or callable(params):
         params = [params]
     if len(params) == 0:
@@ -257,6 +253,30 @@ def _setup(
         raise ValueError(
             f"`positive` must be one bool or {len(getters)} bools (one per parameter)."
         )
+    return getters, positive
+
+
+def _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project):
+    return dict(
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        n_save=n_save,
+        dt0=dt0,
+        max_steps=max_steps,
+        project=project,
+    )
+
+
+def _setup(
+    scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solver_kw
+):
+    """Check the arguments of `fit`/`value_and_grad`; split the scene."""
+    if not isinstance(scene, Scene):
+        raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
+    if not callable(loss_fn):
+        raise ValueError("`loss_fn` must be callable: loss_fn(traj, scene) -> scalar.")
+    getters, positive = resolve_params(scene, params, positive)
     for g, p in zip(getters, positive):
         x = np.asarray(g(scene))
         if p and (not np.all(np.isfinite(x)) or np.any(x <= 0)):
@@ -320,24 +340,9 @@ def value_and_grad(
 
     **Returns:** `(loss, {label: gradient})`.
     """
+    solve_kw = _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project)
     getters, theta, pos, frozen, config, ts = _setup(
-        scene,
-        loss_fn,
-        params,
-        positive,
-        simulate,
-        ts,
-        adjoint,
-        checkpoints,
-        dict(
-            solver=solver,
-            rtol=rtol,
-            atol=atol,
-            n_save=n_save,
-            dt0=dt0,
-            max_steps=max_steps,
-            project=project,
-        ),
+        scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
     )
     value, grad = _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
     return float(value), {g.label: np.asarray(g(grad)) for g in getters}
@@ -403,24 +408,9 @@ def fit(
     **Returns:** a `FitResult` (fitted scene, loss history, final gradient norm,
     parameter history).
     """
+    solve_kw = _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project)
     getters, theta, pos, frozen, config, ts = _setup(
-        scene,
-        loss_fn,
-        params,
-        positive,
-        simulate,
-        ts,
-        adjoint,
-        checkpoints,
-        dict(
-            solver=solver,
-            rtol=rtol,
-            atol=atol,
-            n_save=n_save,
-            dt0=dt0,
-            max_steps=max_steps,
-            project=project,
-        ),
+        scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
     )
     check_int("steps", steps, 1)
     adj = config.adjoint

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._fit import resolve
+from ._fit import resolve, resolve_params
 from ._scene import Scene
 from ._simulate import SolveConfig, solve
 from ._validate import check_int, check_positive
@@ -100,9 +100,16 @@ def _solve_ls(problem, theta0, rtol, atol, max_iters):
     )
     theta = sol.value
     r0 = problem.residuals(theta0)
-    r = problem.residuals(theta)
-    # Jacobian in the parameters' own units: dr/dp = dr/dtheta / p for log p.
-    J = jnp.stack(jax.jacfwd(problem.residuals)(theta), axis=1)
+
+    def with_value(th):
+        r = problem.residuals(th)
+        return r, r
+
+    # The residuals at the optimum and their Jacobian from one solve with one
+    # tangent per parameter; in the parameters' own units: dr/dp = dr/dtheta / p
+    # for log p.
+    J, r = jax.jacfwd(with_value, has_aux=True)(theta)
+    J = jnp.stack(J, axis=1)
     scale = jnp.stack(
         [jnp.where(pos, jnp.exp(t), 1.0) for t, pos in zip(theta, problem.positive)]
     )
@@ -179,22 +186,12 @@ def least_squares(
         )
     if not callable(residual_fn):
         raise ValueError("`residual_fn` must be callable: residual_fn(traj, scene).")
-    if isinstance(params, str) or callable(params):
-        params = [params]
-    if len(params) == 0:
-        raise ValueError("`params` must name at least one parameter to fit.")
-    getters = tuple(resolve(scenes[0], p) for p in params)
+    getters, positive = resolve_params(scenes[0], params, positive)
+    getters, positive = tuple(getters), tuple(positive)
     for sc in scenes[1:]:
-        for p in params:
+        for p in [params] if isinstance(params, str) or callable(params) else params:
             resolve(sc, p)  # every experiment holds every parameter
     labels = [g.label for g in getters]
-    if isinstance(positive, bool):
-        positive = [positive] * len(getters)
-    positive = tuple(bool(p) for p in positive)
-    if len(positive) != len(getters):
-        raise ValueError(
-            f"`positive` must be one bool or {len(getters)} bools (one per parameter)."
-        )
     starts = []
     for g, pos, label in zip(getters, positive, labels):
         leaf = g(scenes[0])
@@ -287,9 +284,9 @@ def least_squares(
         cost=0.5 * float(r @ r),
         sigma=s,
         iterations=iters,
-        # each LM step: one solve per scene with its JVPs; plus the start, the
-        # optimum and its Jacobian
-        solves=(iters + 3) * len(scenes),
+        # each LM step: one solve per scene with its JVPs; plus the start and
+        # the optimum with its Jacobian
+        solves=(iters + 2) * len(scenes),
         converged=converged,
         message=message,
         time=elapsed,

@@ -66,3 +66,12 @@ def check_angle(name: str, value) -> None:
         return
     if not math.isfinite(float(value)):
         raise ValueError(f"`{name}` must be a finite angle in radians; got {value!r}.")
+
+
+def check_fields(obj, positive=None, nonnegative=None) -> None:
+    """`check_positive` / `check_nonnegative` on fields of `obj`, given as dicts
+    field name -> unit."""
+    for name, unit in (positive or {}).items():
+        check_positive(name, getattr(obj, name), unit)
+    for name, unit in (nonnegative or {}).items():
+        check_nonnegative(name, getattr(obj, name), unit)

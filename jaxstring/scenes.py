@@ -17,4 +17,8 @@ from .tandem.scenes import (
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
 )
-from .tether.scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
+from .tether.scenes import (
+    tether_fixed as tether_fixed,
+    tether_fold as tether_fold,
+    tether_winch as tether_winch,
+)

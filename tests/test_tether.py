@@ -198,30 +198,11 @@ def test_aceam_and_exact_end_forces_agree_for_gentle_bending():
         assert np.max(rel) < 0.01, (name, np.max(rel))
 
 
-def _v_release(method, interior_deg, N=11, L=10.0):
-    """A heavy cable folded into a V (interior angle at the middle), ends fixed,
-    released from rest in still water."""
-    n_links = N + 1
-    half = math.radians(interior_deg) / 2
-    k = n_links // 2
-    left = np.array([math.sin(half), 0.0, -math.cos(half)])
-    right = np.array([math.sin(half), 0.0, math.cos(half)])
-    pts = np.cumsum(np.array([left] * k + [right] * (n_links - k)) * L / n_links, 0)
-    # Both with proportional end links: only the tension method differs.
+def _v_release(method, interior_deg):
+    """`tether_fold`: both methods with proportional end links, so that only the
+    tension method differs; Dopri5 over 1 s."""
     kw = {} if method == "aceam" else {"end_links": "spring"}
-    cls = AceamTether if method == "aceam" else ExactTether
-    model = cls(
-        L=L,
-        d=0.01,
-        mass_per_length=0.5,
-        N=N,
-        root=FixedEnd(jnp.zeros(3)),
-        fast=FixedEnd(jnp.asarray(pts[-1])),
-        **kw,
-    )
-    y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
-    effects = (Weight(), Buoyancy(), Drag())
-    scene = Scene(model=model, effects=effects, y0=y0, t1=1.0, env=ENV)
+    scene = js.tether.tether_fold(method, interior_deg, **kw)
     return js.simulate(
         scene, "dopri5", rtol=1e-8, atol=1e-8, ts=jnp.linspace(0.0, 1.0, 101)
     )

@@ -43,7 +43,13 @@ from jaxtyping import Array, Float
 from .._effect import AbstractEffect, AbstractLoad
 from .._environment import Environment
 from .._model import AbstractModel
-from .._validate import check_finite, check_nonnegative, check_positive, is_concrete
+from .._validate import (
+    check_fields,
+    check_finite,
+    check_nonnegative,
+    check_positive,
+    is_concrete,
+)
 
 
 # Smoothing of |x| and sgn(x) (spec 3.1, [R]).
@@ -193,39 +199,31 @@ def make_hull(
     )
 
 
+# Spec section 5: the turret FPSO (converted VLCC, [S1 dimensions.m]) and the
+# Suezmax-class DP shuttle tanker ([R]); the shuttle's mass follows from its
+# displacement (make_hull with m=None).
+_PARTICULARS = ("L", "B", "T", "C_B", "m", "S", "A_F", "A_L", "C_Y", "lam_p")
+_SPEC_HULLS = {
+    #           L      B     T     C_B   m       S        A_F     A_L      C_Y   lam_p
+    "fpso":    (320.0, 54.5, 21.5, 0.85, 3.10e8, 27447.0, 3939.0, 14368.0, 0.52, 0.05),
+    "shuttle": (250.0, 46.0, 13.5, 0.82, None,   15170.0, 1000.0, 3000.0,  0.55, 0.05),
+}  # fmt: skip
+
+
+def _spec_hull(which, overrides) -> Hull:
+    return make_hull(**{**dict(zip(_PARTICULARS, _SPEC_HULLS[which])), **overrides})
+
+
 def fpso_hull(**overrides) -> Hull:
-    """The turret FPSO of the spec (converted VLCC, [S1 dimensions.m])."""
-    kw = dict(
-        L=320.0,
-        B=54.5,
-        T=21.5,
-        C_B=0.85,
-        m=3.10e8,
-        S=27447.0,
-        A_F=3939.0,
-        A_L=14368.0,
-        C_Y=0.52,
-        lam_p=0.05,
-    )
-    kw.update(overrides)
-    return make_hull(**kw)
+    """The turret FPSO of the spec (converted VLCC, [S1 dimensions.m]); keyword
+    arguments override its particulars (see `make_hull`)."""
+    return _spec_hull("fpso", overrides)
 
 
 def shuttle_hull(**overrides) -> Hull:
-    """The Suezmax-class DP shuttle tanker of the spec ([R])."""
-    kw = dict(
-        L=250.0,
-        B=46.0,
-        T=13.5,
-        C_B=0.82,
-        S=15170.0,
-        A_F=1000.0,
-        A_L=3000.0,
-        C_Y=0.55,
-        lam_p=0.05,
-    )
-    kw.update(overrides)
-    return make_hull(**kw)
+    """The Suezmax-class DP shuttle tanker of the spec ([R]); keyword arguments
+    override its particulars (see `make_hull`)."""
+    return _spec_hull("shuttle", overrides)
 
 
 def _stack(*hulls):
@@ -437,11 +435,11 @@ class Hawser(AbstractVesselLoad):
     c_h: Float[Array, ""] = _param(0.0)
 
     def __check_init__(self):
-        check_positive("l0", self.l0, "m")
-        check_positive("k_h", self.k_h, "N/m")
-        check_positive("delta_h", self.delta_h, "m")
-        check_positive("s", self.s, "m")
-        check_nonnegative("c_h", self.c_h, "N s/m")
+        check_fields(
+            self,
+            positive={"l0": "m", "k_h": "N/m", "delta_h": "m", "s": "m"},
+            nonnegative={"c_h": "N s/m"},
+        )
 
     def tension_of_stretch(self, delta):
         dp = self.s * jax.nn.softplus(delta / self.s)

@@ -29,7 +29,11 @@ from .models import (
     arc_state as arc_state,
     hanging_state as hanging_state,
 )
-from .scenes import tether_fixed as tether_fixed, tether_winch as tether_winch
+from .scenes import (
+    tether_fixed as tether_fixed,
+    tether_fold as tether_fold,
+    tether_winch as tether_winch,
+)
 
 
 __all__ = [
@@ -52,5 +56,6 @@ __all__ = [
     "arc_state",
     "hanging_state",
     "tether_fixed",
+    "tether_fold",
     "tether_winch",
 ]

@@ -240,3 +240,57 @@ def tether_winch(
         name="tether-winch",
         **kw,
     )
+
+
+def tether_fold(
+    method: str = "exact",
+    interior_deg: float = 110.0,
+    N: int = 11,
+    L: float = 10.0,
+    d: float = 0.01,
+    mass_per_length: float = 0.5,
+    rho: float = 1024.0,
+    t1: float = 1.0,
+    **model_options,
+) -> Scene:
+    """A sharp bend: a heavy cable folded into a V of interior angle `interior_deg`
+    (deg) at its middle node, both ends fixed, released from rest in still water
+    (weight, buoyancy, drag).
+
+    The links of an N-node chain (N + 1 links of L/(N + 1)) point down-and-along the
+    first half and up-and-along the second; `model_options` go to the tether model
+    (e.g. `end_links="spring"` for the exact chain). ACEAM's one-axis projection
+    per element fails at link angles of about 90-110 deg (the paper's stated
+    weakness), which this scene shows.
+    """
+    check_choice("method", method, tuple(TETHER_METHODS))
+    _check_common(N, L, d, rho, t1)
+    check_positive("mass_per_length", mass_per_length, "kg/m")
+    if not 0.0 < float(interior_deg) < 180.0:
+        raise ValueError(
+            f"`interior_deg` must be in (0, 180) deg; got {interior_deg!r}."
+        )
+    n_links = N + 1
+    half = np.radians(interior_deg) / 2
+    left = np.array([np.sin(half), 0.0, -np.cos(half)])
+    right = np.array([np.sin(half), 0.0, np.cos(half)])
+    k = n_links // 2
+    pts = np.cumsum(np.array([left] * k + [right] * (n_links - k)) * L / n_links, 0)
+    model = TETHER_METHODS[method](
+        L=L,
+        d=d,
+        mass_per_length=mass_per_length,
+        N=N,
+        root=FixedEnd(jnp.zeros(3)),
+        fast=FixedEnd(jnp.asarray(pts[-1])),
+        **model_options,
+    )
+    y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
+    return Scene(
+        model=model,
+        effects=(Weight(), Buoyancy(), Drag()),
+        y0=y0,
+        t1=t1,
+        name="tether-fold",
+        env=Environment(rho_water=rho),
+    )
