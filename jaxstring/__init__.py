@@ -9,6 +9,7 @@ from . import (
     tandem as tandem,
     tether as tether,
 )
+from ._config import enable_compilation_cache as enable_compilation_cache
 from ._effect import AbstractEffect as AbstractEffect, AbstractLoad as AbstractLoad
 from ._environment import (
     AbstractCurrent as AbstractCurrent,

@@ -60,7 +60,7 @@ def test_tandem_animation_draws_the_vessels(tmp_path):
 def test_cli_animate_writes_a_gif(tmp_path, capsys):
     argv = ["run", "string-pendulum", "--k", "4", "--EA", "1e4", "--t1", "0.2"]
     code = main(
-        argv + ["--no-rerun", "--animate", "--frames", "6", "--out", str(tmp_path)]
+        argv + ["--no-cache", "--animate", "--frames", "6", "--out", str(tmp_path)]
     )
     assert code == 0
     gif = tmp_path / "string_pendulum.gif"

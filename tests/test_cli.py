@@ -8,7 +8,7 @@ FAST = ["run", "string-pendulum", "--k", "6", "--EA", "1e4", "--t1", "0.3"]
 
 
 def test_run_string_pendulum(tmp_path, capsys):
-    code = main(FAST + ["--alpha", "0.01", "--no-rerun", "--out", str(tmp_path)])
+    code = main(FAST + ["--alpha", "0.01", "--no-cache", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0
     assert "status" in out and "success" in out
@@ -42,3 +42,32 @@ def test_unknown_scene_lists_valid(capsys):
         main(["run", "no-such-scene"])
     assert exc.value.code == 2
     assert "string-pendulum" in capsys.readouterr().err
+
+
+def test_command_caches_the_compiled_solve(tmp_path):
+    # The `jaxstring` command runs with EQX_ON_ERROR=nan, so its solve has no host
+    # callbacks and JAX writes it to the persistent cache; a second process reads
+    # it back instead of compiling.
+    import os
+    import subprocess
+    import sys
+
+    exe = os.path.join(os.path.dirname(sys.executable), "jaxstring")
+    if not os.path.exists(exe):
+        pytest.skip("the jaxstring command is not installed beside this python")
+    cache = tmp_path / "cache"
+    env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
+    env["JAXSTRING_CACHE_DIR"] = str(cache)
+    cmd = [exe, *FAST, "--out", str(tmp_path / "out")]
+    first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    solves = [f for f in os.listdir(cache) if f.startswith("jit_call")]
+    assert solves, sorted(os.listdir(cache))
+    second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert second.returncode == 0, second.stderr
+    # Nothing new to compile: the same entries, and the same result.
+    assert sorted(f for f in os.listdir(cache) if f.startswith("jit_call")) == solves
+    end = [ln for ln in first.stdout.splitlines() if ln.startswith("end mass")]
+    assert end and end == [
+        ln for ln in second.stdout.splitlines() if ln.startswith("end mass")
+    ]

@@ -201,9 +201,9 @@ def _common_arguments(p: argparse.ArgumentParser, solver: str = "kvaerno5") -> N
         help="text progress meter (default: on for long runs)",
     )
     p.add_argument(
-        "--no-rerun",
+        "--timing",
         action="store_true",
-        help="skip the second (compiled) call that times the run without compiling",
+        help="run the scene a second time to report the compiled run's wall time",
     )
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
     _animation_arguments(p)
@@ -215,6 +215,16 @@ def _animation_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--frames", type=int, default=60, help="frames of the animation (default 60)"
+    )
+
+
+def _cache_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="JAX's persistent compilation cache in $JAXSTRING_CACHE_DIR or "
+        "~/.cache/jaxstring/jax: a second run skips compilation (default: on)",
     )
 
 
@@ -235,6 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp = scene_parsers.add_parser(name, help=runner.help, description=runner.help)
         runner.add_arguments(sp)
         _common_arguments(sp, runner.solver)
+        _cache_arguments(sp)
     from .tandem import TANKER_SCENES
 
     for name in TANKER_SCENES:
@@ -249,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
             "(tandem-fishtail, tandem-controlled)",
         )
         _animation_arguments(sp)
+        _cache_arguments(sp)
     return parser
 
 
@@ -301,7 +313,7 @@ def _run_scene(args: argparse.Namespace) -> int:
     try:
         traj, wall_first = call()
         wall_second = None
-        if not args.no_rerun:
+        if args.timing:
             traj, wall_second = call()
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -424,6 +436,10 @@ def main(argv=None) -> int:
             print(f"error: --frames must be an integer >= 2; got {args.frames}.",
                   file=sys.stderr)  # fmt: skip
             return 2
+        if args.cache:
+            from .._config import enable_compilation_cache
+
+            enable_compilation_cache(min_compile_s=0.0, warn=False)
         from .tandem import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:
