@@ -63,8 +63,28 @@ class LeastSquaresResult(eqx.Module):
     time: float
 
 
+def _stack_scenes(scenes):
+    """The scenes as one pytree with a leading member axis on every array, when
+    they share their structure (same static parts, array shapes and dtypes); else
+    None."""
+    parts = [eqx.partition(s, eqx.is_array) for s in scenes]
+    arrays, static = parts[0]
+    for a, st in parts[1:]:
+        if jax.tree_util.tree_structure(a) != jax.tree_util.tree_structure(arrays):
+            return None
+        if not eqx.tree_equal(st, static):
+            return None
+        shapes = jax.tree_util.tree_map(lambda x, y: x.shape == y.shape, a, arrays)
+        if not all(jax.tree_util.tree_leaves(shapes)):
+            return None
+    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[a for a, _ in parts])
+    return eqx.combine(stacked, static)
+
+
 class _Problem(eqx.Module):
     scenes: tuple
+    # The scenes stacked along a member axis, solved in one vmap (None: one by one).
+    stacked: Any
     getters: tuple = eqx.field(static=True)
     positive: tuple = eqx.field(static=True)
     residual_fn: Any
@@ -80,12 +100,18 @@ class _Problem(eqx.Module):
         vals = [v.astype(c.dtype) for v, c in zip(vals, current)]
         return eqx.tree_at(lambda s: [g(s) for g in self.getters], scene, vals)
 
+    def residual(self, theta, scene):
+        sc = self.with_values(scene, theta)
+        return jnp.ravel(self.residual_fn(solve(sc, self.config, self.ts), sc))
+
     def residuals(self, theta, args=None):
         del args
+        if self.stacked is not None:
+            members = eqx.filter_vmap(self.residual, in_axes=(None, 0))
+            return jnp.ravel(members(theta, self.stacked))
         out = []
         for scene in self.scenes:
-            sc = self.with_values(scene, theta)
-            out.append(jnp.ravel(self.residual_fn(solve(sc, self.config, self.ts), sc)))
+            out.append(self.residual(theta, scene))
         return jnp.concatenate(out)
 
 
@@ -160,7 +186,8 @@ def least_squares(
 
     - `scene`: the starting scene, or a list of scenes (several experiments sharing
       the parameters: each must hold every named parameter; their residuals are
-      stacked). Its values of `params` are the initial guess.
+      stacked; scenes of one structure, such as two release angles, are solved
+      together in one vmap, others one after another). Its values of `params` are the initial guess.
     - `residual_fn`: `residual_fn(traj, scene) -> array` of residuals in units of the
       measurement (model minus data), for `traj` the scene's Trajectory at `ts`. Data
       it closes over are compiled in as constants; an `eqx.Module` with array fields
@@ -221,7 +248,8 @@ def least_squares(
     if ts is None:
         ts = jnp.linspace(scenes[0].t0, scenes[0].t1, 201)
     ts = jnp.asarray(ts, dtype=jnp.float64)
-    problem = _Problem(scenes, getters, positive, residual_fn, config, ts)
+    stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
+    problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
     theta0 = [
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)

@@ -136,3 +136,24 @@ def test_bad_input_names_the_argument(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         js.least_squares(**args)
+
+
+def test_experiments_of_one_structure_are_solved_in_one_vmap():
+    from jaxstring._fit import resolve
+    from jaxstring._least_squares import _Problem, _stack_scenes
+    from jaxstring._simulate import SolveConfig
+
+    a, b = _scene(), _scene(3 * np.pi / 8)
+    assert _stack_scenes((a, b)) is not None
+    # Another element count is another structure: solved one after the other.
+    k8 = js.pendulum.string_pendulum("displacement", k=8, t1=0.3)
+    assert _stack_scenes((a, k8)) is None
+    getters = tuple(resolve(a, p) for p in ("alpha", "EA"))
+    residual = _TwoData(jnp.asarray(_data()), jnp.asarray(_data(3 * np.pi / 8)))
+    config = SolveConfig(solver="kvaerno5", rtol=1e-10, atol=1e-10)
+    theta = [jnp.log(0.06), jnp.log(1.2e3)]
+    args = (getters, (True, True), residual, config, TS)
+    looped = _Problem((a, b), None, *args).residuals(theta)
+    batched = _Problem((a, b), _stack_scenes((a, b)), *args).residuals(theta)
+    assert looped.shape == batched.shape == (2 * TS.size * 2,)
+    np.testing.assert_allclose(batched, looped, rtol=0, atol=1e-9)
