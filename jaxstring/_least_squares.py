@@ -187,7 +187,8 @@ def least_squares(
     - `scene`: the starting scene, or a list of scenes (several experiments sharing
       the parameters: each must hold every named parameter; their residuals are
       stacked; scenes of one structure, such as two release angles, are solved
-      together in one vmap, others one after another). Its values of `params` are the initial guess.
+      together in one vmap, others one after another). Its values of `params`
+      are the initial guess.
     - `residual_fn`: `residual_fn(traj, scene) -> array` of residuals in units of the
       measurement (model minus data), for `traj` the scene's Trajectory at `ts`. Data
       it closes over are compiled in as constants; an `eqx.Module` with array fields
