@@ -34,7 +34,7 @@ import optax
 from ._jit import cpu_jit
 from ._scene import Scene
 from ._simulate import ADJOINTS as ADJOINTS, SolveConfig, make_adjoint, solve
-from ._validate import check_int, check_positive
+from ._validate import check_int, check_nonnegative, check_positive, check_times
 
 
 # --------------------------------------------------------------------------------------
@@ -287,7 +287,10 @@ def _setup(
     adj = make_adjoint(adjoint)
     config = SolveConfig(adjoint=adj, **solver_kw)
     if ts is not None:
+        check_times("ts", ts, scene.t0, scene.t1)
         ts = jnp.asarray(ts, dtype=jnp.float64)
+    if checkpoints is not None and checkpoints != "auto":
+        check_int("checkpoints", checkpoints, 1)
     if (
         simulate
         and type(adj) is dfx.RecursiveCheckpointAdjoint
@@ -408,14 +411,30 @@ def fit(
     **Returns:** a `FitResult` (fitted scene, loss history, final gradient norm,
     parameter history).
     """
+    # Checked before `_setup`, which with checkpoints="auto" runs a solve.
+    check_int("steps", steps, 1)
+    if optimizer is None:
+        check_positive("learning_rate", learning_rate)
+    elif not isinstance(optimizer, optax.GradientTransformation):
+        raise ValueError(
+            "`optimizer` must be an optax GradientTransformation (e.g. "
+            f"optax.adam(1e-2)); got {optimizer!r}."
+        )
+    if gtol is not None:
+        check_nonnegative("gtol", gtol)
+    if print_every is not None:
+        check_int("print_every", print_every, 0)
+    if callback is not None and not callable(callback):
+        raise ValueError(
+            f"`callback` must be callable as callback(step, loss, scene); got "
+            f"{callback!r}."
+        )
     solve_kw = _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project)
     getters, theta, pos, frozen, config, ts = _setup(
         scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
     )
-    check_int("steps", steps, 1)
     adj = config.adjoint
     if optimizer is None:
-        check_positive("learning_rate", learning_rate)
         optimizer = optax.adam(learning_rate)
     optimizer = optax.with_extra_args_support(optimizer)
     opt_state = optimizer.init(eqx.filter(theta, eqx.is_inexact_array))
@@ -517,9 +536,17 @@ def gauss_newton(
     **Returns:** dict with `names`, `values` (p), `std` (standard deviations, in the
     parameters' units), `cov` (p x p), `J` (residuals x p), `sigma`.
     """
+    if not isinstance(scene, Scene):
+        raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
+    if not callable(residual_fn):
+        raise ValueError("`residual_fn` must be callable: residual_fn(traj, scene).")
     if isinstance(params, str) or callable(params):
         params = [params]
+    if len(params) == 0:
+        raise ValueError("`params` must name at least one parameter.")
     getters = [resolve(scene, p) for p in params]
+    if sigma is not None:
+        check_positive("sigma", sigma)
     config = SolveConfig(
         solver=solver,
         rtol=rtol,
@@ -529,6 +556,8 @@ def gauss_newton(
         project=project,
         adjoint=dfx.ForwardMode(),
     )
+    if ts is not None:
+        check_times("ts", ts, scene.t0, scene.t1)
     p0 = jnp.stack([jnp.asarray(g(scene), dtype=jnp.float64) for g in getters])
     if ts is not None:
         ts = jnp.asarray(ts, dtype=jnp.float64)

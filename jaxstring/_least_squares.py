@@ -27,7 +27,7 @@ import optimistix as optx
 from ._fit import resolve, resolve_params
 from ._scene import Scene
 from ._simulate import SolveConfig, solve
-from ._validate import check_int, check_positive
+from ._validate import check_int, check_positive, check_times, show
 
 
 class LeastSquaresResult(eqx.Module):
@@ -153,7 +153,18 @@ def _check_bounds(bounds, labels, starts):
             raise ValueError(
                 f"`bounds` names {name!r}, which is not among `params` {labels}."
             )
-        low, high = b
+        try:
+            low, high = (float(x) for x in b)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"`bounds[{name!r}]` must be a pair (low, high) of numbers; got "
+                f"{show(b)}."
+            ) from None
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise ValueError(
+                f"`bounds[{name!r}]` must be (low, high) with low < high (no NaN; "
+                f"inf for no bound); got ({low!r}, {high!r})."
+            )
         p0 = starts[labels.index(name)]
         if not (low <= p0 <= high):
             raise ValueError(
@@ -248,6 +259,9 @@ def least_squares(
     )
     if ts is None:
         ts = jnp.linspace(scenes[0].t0, scenes[0].t1, 201)
+    else:
+        for sc in scenes:
+            check_times("ts", ts, sc.t0, sc.t1)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
     problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)

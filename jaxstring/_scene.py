@@ -1,6 +1,7 @@
 """A scene: model, effects, environment, initial state and time span."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -8,7 +9,24 @@ from jaxtyping import Array, Float
 from ._effect import AbstractEffect
 from ._environment import Environment
 from ._model import AbstractModel
-from ._validate import check_finite, is_concrete
+from ._validate import check_finite, check_shape, is_concrete, show
+
+
+def _state(y0):
+    # Lists and integer arrays become float arrays; anything that is not numbers is
+    # left for `__check_init__` to refuse by name.
+    try:
+        y = jnp.asarray(y0)
+    except TypeError:
+        return y0
+    return y if jnp.issubdtype(y.dtype, jnp.inexact) else y.astype(jnp.float64)
+
+
+def _time(t):
+    try:
+        return jnp.asarray(t)
+    except TypeError:
+        return t
 
 
 class Scene(eqx.Module):
@@ -29,26 +47,44 @@ class Scene(eqx.Module):
 
     model: AbstractModel
     effects: tuple[AbstractEffect, ...]
-    y0: Float[Array, "..."]
-    t1: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    t0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    y0: Float[Array, "..."] = eqx.field(converter=_state)
+    t1: Float[Array, ""] = eqx.field(converter=_time)
+    t0: Float[Array, ""] = eqx.field(converter=_time, default=0.0)
     name: str = eqx.field(static=True, default="scene")
     env: Environment = eqx.field(default_factory=Environment)
 
     def __check_init__(self):
+        if not isinstance(self.model, AbstractModel):
+            raise ValueError(
+                "`model` must be a jaxstring model (AbstractModel); got "
+                f"{type(self.model).__name__}: {self.model!r}."
+            )
         if not isinstance(self.effects, tuple) or not all(
             isinstance(e, AbstractEffect) for e in self.effects
         ):
-            raise ValueError("`effects` must be a tuple of jaxstring effects.")
+            raise ValueError(
+                "`effects` must be a tuple of jaxstring effects (AbstractEffect); "
+                f"got {self.effects!r}."
+            )
         kinds = [type(e) for e in self.effects]
-        if len(set(kinds)) != len(kinds):
-            raise ValueError("`effects` names an effect twice.")
+        twice = sorted({k.__name__ for k in kinds if kinds.count(k) > 1})
+        if twice:
+            raise ValueError(
+                f"`effects` names {', '.join(twice)} twice; valid: each effect kind "
+                "at most once."
+            )
+        if not hasattr(self.y0, "shape") or not jnp.issubdtype(
+            jnp.result_type(self.y0), jnp.inexact
+        ):
+            raise ValueError(
+                "`y0` must be an array of floating-point numbers (the model's state); "
+                f"got {self.y0!r}."
+            )
         check_finite("y0", self.y0)
-        if not isinstance(self.model, AbstractModel):
-            raise ValueError("`model` must be a jaxstring model (AbstractModel).")
         if not isinstance(self.env, Environment):
             raise ValueError(
-                f"`env` must be a jaxstring Environment; got {type(self.env).__name__}."
+                "`env` must be a jaxstring Environment; got "
+                f"{type(self.env).__name__}: {self.env!r}."
             )
         accepts = self.model.accepts
         for e in self.effects:
@@ -64,11 +100,17 @@ class Scene(eqx.Module):
             raise ValueError(
                 f"`y0` has shape {jnp.shape(self.y0)}; the model needs {expected}."
             )
+        for name in ("t0", "t1"):
+            t = getattr(self, name)
+            if not isinstance(t, jax.Array) or not jnp.issubdtype(t.dtype, jnp.number):
+                raise ValueError(f"`{name}` must be a time in s (a number); got {t!r}.")
+            check_shape(name, t, (), "s")
+        check_finite("t0", self.t0)
         if is_concrete(self.t1) and is_concrete(self.t0):
             if not np.isfinite(float(self.t1)) or float(self.t1) <= float(self.t0):
                 raise ValueError(
-                    f"`t1` must be a finite time > t0 = {float(self.t0)} s; "
-                    f"got {self.t1!r}."
+                    f"`t1` must be a finite time > t0 = {float(self.t0):g} s; "
+                    f"got {show(self.t1)}."
                 )
 
     def vector_field(self, t, y):

@@ -14,7 +14,13 @@ from ._solvers.projected import ProjectedSolver
 from ._solvers.registry import build_solver, check_solver, is_adaptive
 from ._solvers.step_size import STEP_CONTROLS, make_controller
 from ._trajectory import Trajectory
-from ._validate import check_choice, check_int, check_positive, is_concrete
+from ._validate import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_positive,
+    check_times,
+)
 
 
 ADJOINTS = ("recursive", "direct", "backsolve", "forward")
@@ -67,6 +73,8 @@ class SolveConfig(eqx.Module):
         check_int("n_save", self.n_save, 2)
         check_int("max_steps", self.max_steps, 1)
         check_choice("step_control", self.step_control, STEP_CONTROLS)
+        check_bool("project", self.project)
+        check_bool("progress", self.progress)
         if self.dt0 is not None:
             check_positive("dt0", self.dt0, "s")
         for name in ("newton_rtol", "newton_atol"):
@@ -242,21 +250,18 @@ def simulate(
     check_choice("step_control", step_control, STEP_CONTROLS)
     if dt0 is not None:
         check_positive("dt0", dt0, "s")
-    if ts is None:
-        check_int("n_save", n_save, 2)
-        ts = jnp.linspace(scene.t0, scene.t1, n_save)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
-    if is_concrete(ts):
-        tsn = np.asarray(ts)
-        if tsn.ndim != 1 or np.any(np.diff(tsn) < 0):
-            raise ValueError("`ts` must be a 1-d array of increasing times.")
-        span_known = is_concrete(scene.t0) and is_concrete(scene.t1)
-        if span_known and (tsn[0] < float(scene.t0) or tsn[-1] > float(scene.t1)):
-            raise ValueError("`ts` must lie inside [scene.t0, scene.t1].")
     if newton_rtol is not None:
         check_positive("newton_rtol", newton_rtol)
     if newton_atol is not None:
         check_positive("newton_atol", newton_atol)
+    check_bool("project", project)
+    check_bool("progress", progress)
+    if ts is None:
+        check_int("n_save", n_save, 2)
+        ts = jnp.linspace(scene.t0, scene.t1, n_save)
+    else:
+        check_times("ts", ts, scene.t0, scene.t1)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
     f64 = lambda x: None if x is None else jnp.asarray(x, dtype=jnp.float64)
     config = SolveConfig(
         solver=solver,

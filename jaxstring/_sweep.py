@@ -67,6 +67,8 @@ arithmetic at a few ns per flop whatever the layout (a members-last variant unde
 """
 
 import concurrent.futures
+import copy
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -79,7 +81,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from ._fit import resolve
+from ._fit import _follow, parameter_names, resolve
 from ._jit import cpu_jit
 from ._scene import Scene
 from ._simulate import SolveConfig, solve
@@ -90,7 +92,7 @@ from ._solvers.registry import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
 from ._solvers.stage_newton import StageNewton
 from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
-from ._validate import check_choice, check_int
+from ._validate import check_choice, check_int, check_times, show
 
 
 class SweepResult(eqx.Module):
@@ -389,6 +391,158 @@ def _sweep_devices(local, vals, scene, getters, fn, config, ts, batch_size, devi
     return jtu.tree_map(lambda *xs: np.concatenate([np.asarray(x) for x in xs]), *outs)
 
 
+# --------------------------------------------------------------------------------------
+# Checking the members before anything compiles
+
+
+def _check_inits(obj) -> list:
+    """The `__check_init__` methods an equinox Module ran when it was built."""
+    return [
+        c.__dict__["__check_init__"]
+        for c in type(obj).__mro__
+        if "__check_init__" in c.__dict__
+    ]
+
+
+def _static_field(scene, name):
+    """`(owner, field, path)` of the one static (structure) field that `name` names
+    (`"k"`, `"model.k"`, `"DisplacementString.k"`), or None."""
+    hits = []
+
+    def walk(obj, path):
+        if isinstance(obj, eqx.Module):
+            for f in dataclasses.fields(obj):
+                p = f"{path}.{f.name}" if path else f.name
+                if f.metadata.get("static", False):
+                    if name in (f.name, p, f"{type(obj).__name__}.{f.name}"):
+                        hits.append((obj, f.name, p))
+                else:
+                    walk(getattr(obj, f.name, None), p)
+        elif isinstance(obj, (tuple, list)):
+            for i, v in enumerate(obj):
+                walk(v, f"{path}[{i}]")
+
+    walk(scene, "")
+    return hits[0] if len(hits) == 1 else None
+
+
+def _refuse_structure(scene, name, values):
+    """Raise for a swept name that is a static field (a number of elements, a
+    formulation switch): first for a member its own constructor would refuse
+    (member index, value, valid range), else because one compiled sweep cannot vary
+    structure. Returns quietly when `name` is no static field."""
+    hit = _static_field(scene, name) if isinstance(name, str) else None
+    if hit is None:
+        return
+    owner, field, path = hit
+    a = np.asarray(values, dtype=object)
+    for i, x in enumerate(a.ravel().tolist()):
+        if isinstance(x, float) and x.is_integer():
+            x = int(x)
+        member = copy.copy(owner)
+        object.__setattr__(member, field, x)
+        try:
+            for check in _check_inits(member):
+                check(member)
+        except ValueError as e:
+            where = np.unravel_index(i, a.shape) if a.ndim > 1 else i
+            raise ValueError(
+                f"sweep `values[{name!r}]` member {where} = {x!r} is invalid: {e}"
+            ) from None
+    raise ValueError(
+        f"`values`: {name!r} ({path}) is structure of {type(owner).__name__} (a "
+        "static field: it sets the shapes or the equations), which one compiled "
+        "sweep cannot vary; loop over it in Python and sweep array parameters, "
+        "e.g. " + ", ".join(repr(n) for n in parameter_names(scene)[:4]) + "."
+    )
+
+
+def _check_members(scene, getters, arrays, grid, shape):
+    """Validate every member as its constructors would, before anything compiles.
+
+    A member replaces leaves of the scene with `eqx.tree_at`, which runs no
+    `__check_init__`: here each Module that holds a swept leaf (and each Module
+    above it, up to the model or effect: a hull's length bounds the model's
+    fairlead positions) runs its checks with each member's values. A refused member
+    raises a ValueError naming the parameter, the member's index and value, and the
+    constructor's message (the valid range).
+    """
+    nodes = {}  # path of a Module above a swept leaf -> indices of its leaves
+    for j, g in enumerate(getters):
+        for k in range(len(g.path)):
+            prefix = g.path[:k]
+            # The scene's own checks read the structure only (shapes, kinds of
+            # effects), except for the time span: run them for t0/t1 alone.
+            if k == 0 and len(g.path) > 1:
+                continue
+            nodes.setdefault(prefix, []).append(j)
+    for prefix, idx in nodes.items():
+        node = _follow(scene, prefix)
+        if not isinstance(node, eqx.Module):
+            continue
+        checks = _check_inits(node)
+        if not checks:
+            continue
+        rel = [getters[j].path[len(prefix) :] for j in idx]
+        dtypes = [np.asarray(getters[j](scene)).dtype for j in idx]
+        if grid:
+            axes = np.meshgrid(*[np.arange(arrays[j].size) for j in idx], indexing="ij")
+            rows = np.stack([a.ravel() for a in axes], axis=1)
+        else:
+            n = arrays[idx[0]].size
+            rows = np.repeat(np.arange(n)[:, None], len(idx), axis=1)
+        seen = set()
+        for row in rows:
+            vals = tuple(arrays[j].ravel()[r] for j, r in zip(idx, row))
+            key = tuple(float(v) for v in vals)
+            if key in seen:
+                continue
+            seen.add(key)
+            member = eqx.tree_at(
+                lambda n: [_follow(n, r) for r in rel],
+                node,
+                [jnp.asarray(v, dtype=d) for v, d in zip(vals, dtypes)],
+            )
+            try:
+                for check in checks:
+                    check(member)
+            except ValueError as e:
+                where = ", ".join(
+                    f"`values[{getters[j].label!r}]` member "
+                    f"{_index(r, arrays[j].shape if grid else shape)} = {show(v)}"
+                    for j, r, v in zip(idx, row, vals)
+                )
+                raise ValueError(f"sweep {where} is invalid: {e}") from None
+
+
+def _index(i, shape):
+    """A flat index as the user's index into an array of `shape`."""
+    if len(shape) <= 1:
+        return int(i)
+    return tuple(int(k) for k in np.unravel_index(int(i), shape))
+
+
+def _check_devices(devices):
+    if isinstance(devices, str):
+        if devices != "auto":
+            raise ValueError(
+                "`devices` must be 'auto', 1, None or a list of jax devices; got "
+                f"{devices!r}."
+            )
+        return
+    if devices is None or (isinstance(devices, int) and devices == 1):
+        return
+    if (
+        isinstance(devices, (list, tuple))
+        and devices
+        and all(isinstance(d, jax.Device) for d in devices)
+    ):
+        return
+    raise ValueError(
+        f"`devices` must be 'auto', 1, None or a list of jax devices; got {devices!r}."
+    )
+
+
 def sweep(
     scene: Scene,
     values: dict,
@@ -420,7 +574,12 @@ def sweep(
       `"KelvinVoigt.alpha"`, `"model.EA"`, or a callable `lambda s: ...` as key).
       A batch (`grid=False`): arrays of one common shape, one member per entry. A
       grid (`grid=True`): 1-d arrays, one member per combination (axes in the
-      order of the dict).
+      order of the dict). Each member is checked as the constructors of the
+      Modules holding the swept leaves check their arguments (a stiffness > 0, a
+      finite damping constant, t1 > t0, ...), before anything compiles: a refused
+      member raises a ValueError naming the parameter, the member's index and
+      value, and the valid range. Structure (an int or str field such as the
+      number of elements `k`) cannot be swept: loop over it in Python.
     - `fn`: `fn(traj, scene) -> pytree of arrays` evaluated on each member's
       `Trajectory` inside the compiled call (e.g. a period, the maximum tension);
       default: all observables `traj.obs`.
@@ -469,22 +628,47 @@ def sweep(
     if not isinstance(scene, Scene):
         raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
     if not isinstance(values, dict) or not values:
-        raise ValueError("`values` must be a non-empty dict: name -> array of values.")
+        raise ValueError(
+            "`values` must be a non-empty dict: name -> array of values; got "
+            f"{values!r}."
+        )
+    if fn is not None and not callable(fn):
+        raise ValueError(
+            f"`fn` must be callable, fn(traj, scene) -> pytree of arrays; got {fn!r}."
+        )
     check_choice("order", order, ("given", "sort"))
     check_choice("mode", mode, ("vmap", "lockstep"))
     if batch_size is not None:
         check_int("batch_size", batch_size, 1)
-    getters = tuple(resolve(scene, name) for name in values)
-    if len({g.path for g in getters}) != len(getters):
-        raise ValueError("`values` names the same leaf twice.")
-    arrays = [np.asarray(v, dtype=np.float64) for v in values.values()]
+    _check_devices(devices)
+    getters = []
+    for name, v in values.items():
+        try:
+            getters.append(resolve(scene, name))
+        except ValueError:
+            _refuse_structure(scene, name, v)
+            raise
+    getters = tuple(getters)
+    paths = [g.path for g in getters]
+    twice = [g.label for g in getters if paths.count(g.path) > 1]
+    if twice:
+        raise ValueError(
+            f"`values` names the same leaf twice ({', '.join(map(repr, twice))}); "
+            "valid: each parameter once."
+        )
+    arrays = []
+    for g, v in zip(getters, values.values()):
+        try:
+            arrays.append(np.asarray(v, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"`values[{g.label!r}]` must be an array of numbers; got {v!r}."
+            ) from None
     for g, a in zip(getters, arrays):
         if np.shape(g(scene)) != ():
             raise ValueError(
                 f"`values`: {g.label!r} is not a scalar leaf; sweep scalar parameters."
             )
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"`values[{g.label!r}]` must be finite.")
         if mode == "lockstep" and (g(scene) is scene.t0 or g(scene) is scene.t1):
             raise ValueError(
                 f"`values`: {g.label!r} is the time span, which members of a "
@@ -506,9 +690,11 @@ def sweep(
         )
     if grid:
         if any(a.ndim != 1 for a in arrays):
-            raise ValueError("with `grid=True`, each entry of `values` must be 1-d.")
+            raise ValueError(
+                "with `grid=True`, each entry of `values` must be 1-d; got "
+                + ", ".join(f"{g.label}: {a.shape}" for g, a in zip(getters, arrays))
+            )
         shape = tuple(a.size for a in arrays)
-        arrays = [m.ravel() for m in np.meshgrid(*arrays, indexing="ij")]
     else:
         shape = arrays[0].shape
         if any(a.shape != shape for a in arrays):
@@ -516,10 +702,22 @@ def sweep(
                 "`values` arrays must have one common shape (or use grid=True); got "
                 + ", ".join(f"{g.label}: {a.shape}" for g, a in zip(getters, arrays))
             )
+    if math.prod(shape) == 0:
+        raise ValueError(f"`values` holds no members (shape {shape}).")
+    _check_members(scene, getters, arrays, grid, shape)
+    for g, a in zip(getters, arrays):
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            i = bad[0]
+            raise ValueError(
+                f"`values[{g.label!r}]` member {_index(i, a.shape)} = "
+                f"{show(a.ravel()[i])}: sweep values must be finite numbers."
+            )
+    if grid:
+        arrays = [m.ravel() for m in np.meshgrid(*arrays, indexing="ij")]
+    else:
         arrays = [a.ravel() for a in arrays]
     n = arrays[0].size
-    if n == 0:
-        raise ValueError("`values` holds no members.")
     config = SolveConfig(
         solver=solver,
         rtol=rtol,
@@ -531,6 +729,8 @@ def sweep(
         max_steps=max_steps,
         project=project,
     )
+    if ts is not None:
+        check_times("ts", ts, scene.t0, scene.t1)
     fn = _default_fn if fn is None else fn
     if ts is None:
         ts = jnp.linspace(scene.t0, scene.t1, n_save)

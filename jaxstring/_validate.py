@@ -1,4 +1,5 @@
-"""Input checks that raise ``ValueError`` at construction, naming the argument."""
+"""Input checks that raise ``ValueError`` at construction, naming the argument, the
+value it got and the valid range."""
 
 import math
 
@@ -11,18 +12,47 @@ def is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
-def _values(x):
-    return np.asarray(x, dtype=float)
+def show(value) -> str:
+    """A short text for a value in a message: `-1.0`, `nan`, `[0.  0.2 0.1]`,
+    `'1e-6'`, `None` (arrays print their values, not their type)."""
+    if isinstance(value, (str, bytes, bool)) or value is None:
+        return repr(value)
+    try:
+        a = np.asarray(value)
+    except Exception:
+        return repr(value)
+    if a.dtype.kind not in "biuf":
+        return repr(value)
+    if a.ndim == 0:
+        return repr(a.item())
+    return np.array2string(a, threshold=8, edgeitems=3)
+
+
+def _values(value):
+    """`value` as a float array, or None when it is not numbers (a string, None,
+    an object)."""
+    if isinstance(value, (str, bytes)) or value is None:
+        return None
+    try:
+        a = np.asarray(value)
+    except Exception:
+        return None
+    if a.dtype.kind not in "biuf":
+        return None
+    return a.astype(float)
+
+
+def _unit(unit: str) -> str:
+    return f" {unit}" if unit else ""
 
 
 def check_positive(name: str, value, unit: str = "") -> None:
     if not is_concrete(value):
         return
     v = _values(value)
-    if not np.all(np.isfinite(v)) or np.any(v <= 0):
+    if v is None or not np.all(np.isfinite(v)) or np.any(v <= 0):
         raise ValueError(
-            f"`{name}` must be a finite number > 0{(' ' + unit) if unit else ''}; "
-            f"got {value!r}."
+            f"`{name}` must be a finite number > 0{_unit(unit)}; got {show(value)}."
         )
 
 
@@ -30,18 +60,29 @@ def check_nonnegative(name: str, value, unit: str = "") -> None:
     if not is_concrete(value):
         return
     v = _values(value)
-    if not np.all(np.isfinite(v)) or np.any(v < 0):
+    if v is None or not np.all(np.isfinite(v)) or np.any(v < 0):
         raise ValueError(
-            f"`{name}` must be a finite number >= 0{(' ' + unit) if unit else ''}; "
-            f"got {value!r}."
+            f"`{name}` must be a finite number >= 0{_unit(unit)}; got {show(value)}."
         )
 
 
 def check_finite(name: str, value) -> None:
     if not is_concrete(value):
         return
-    if not np.all(np.isfinite(_values(value))):
-        raise ValueError(f"`{name}` must be finite (no NaN or inf); got {value!r}.")
+    v = _values(value)
+    if v is None or not np.all(np.isfinite(v)):
+        raise ValueError(f"`{name}` must be finite (no NaN or inf); got {show(value)}.")
+
+
+def check_shape(name: str, value, shape: tuple, unit: str = "") -> None:
+    """`value` has exactly `shape` (`()` for a scalar)."""
+    got = np.shape(value)
+    if tuple(got) != tuple(shape):
+        what = "a scalar" if shape == () else f"of shape {tuple(shape)}"
+        raise ValueError(
+            f"`{name}` must be {what}{_unit(f'({unit})' if unit else '')}; got shape "
+            f"{tuple(got)}: {show(value)}."
+        )
 
 
 def check_int(name: str, value, minimum: int) -> None:
@@ -51,8 +92,17 @@ def check_int(name: str, value, minimum: int) -> None:
         raise ValueError(f"`{name}` must be an integer >= {minimum}; got {value!r}.")
 
 
+def check_bool(name: str, value) -> None:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"`{name}` must be True or False; got {value!r}.")
+
+
 def check_choice(name: str, value, choices) -> None:
-    if value not in choices:
+    try:
+        known = value in choices
+    except TypeError:  # an unhashable value
+        known = False
+    if not known:
         close = [c for c in choices if isinstance(value, str) and value[:3] in str(c)]
         hint = f" Perhaps you meant {close[0]!r}?" if close else ""
         raise ValueError(
@@ -64,8 +114,39 @@ def check_choice(name: str, value, choices) -> None:
 def check_angle(name: str, value) -> None:
     if not is_concrete(value):
         return
-    if not math.isfinite(float(value)):
-        raise ValueError(f"`{name}` must be a finite angle in radians; got {value!r}.")
+    v = _values(value)
+    if v is None or v.shape != () or not math.isfinite(float(v)):
+        raise ValueError(
+            f"`{name}` must be a finite angle in radians; got {show(value)}."
+        )
+
+
+def check_times(name: str, ts, t0, t1) -> None:
+    """`ts` is a non-empty 1-d array of finite, non-decreasing times inside
+    `[t0, t1]` (s; the span's ends may be traced, then only the order is checked)."""
+    if not is_concrete(ts):
+        return
+    v = _values(ts)
+    if v is None or v.ndim != 1 or v.size == 0:
+        raise ValueError(
+            f"`{name}` must be a non-empty 1-d array of save times, s; got "
+            f"{show(ts)} (shape {np.shape(ts)})."
+        )
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"`{name}` must be finite times, s; got {show(ts)}.")
+    if np.any(np.diff(v) < 0):
+        i = int(np.argmax(np.diff(v) < 0))
+        raise ValueError(
+            f"`{name}` must be increasing times, s; got {show(ts)} "
+            f"({name}[{i + 1}] = {float(v[i + 1])!r} < {name}[{i}] = {float(v[i])!r})."
+        )
+    if is_concrete(t0) and is_concrete(t1):
+        lo, hi = float(t0), float(t1)
+        if v[0] < lo or v[-1] > hi:
+            raise ValueError(
+                f"`{name}` must lie inside the scene's span [t0, t1] = [{lo:g}, "
+                f"{hi:g}] s; got {show(ts)}."
+            )
 
 
 def check_fields(obj, positive=None, nonnegative=None) -> None:

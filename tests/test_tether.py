@@ -549,7 +549,7 @@ def test_end_kinematics_type():
         (lambda: ExactTether(L=10.0, d=0.01, mass_per_length=1.0, N=1), "`N`"),
         (lambda: tether_winch(released=(100, 100, 101, 90, 95)), "`released`"),
         (lambda: tether_winch(haul_speed=-0.5, payout_speed=2.0), "`haul_speed`"),
-        (lambda: tether_winch(payout_speed=1.0), "`released`"),
+        (lambda: tether_winch(payout_speed=1.0), "`payout_speed`"),
         (lambda: tether_fixed(times=(0.0, 10.0, 5.0, 45.0, 70.0)), "`times`"),
         (lambda: tether_fixed(times=(0.0, 10.0, 10.0, 45.0, 70.0)), "`times`"),
         (lambda: PiecewiseLinear((0.0, 2.0, 1.0), (1.0, 2.0, 3.0)), "`times`"),

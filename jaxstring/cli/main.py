@@ -279,10 +279,20 @@ def _nanmax(x):
 
 def _run_scene(args: argparse.Namespace) -> int:
     runner = SCENES[args.scene]
+    from .._validate import check_positive
+
     try:
+        check_positive("rtol", args.rtol)
+        check_positive("atol", args.atol)
         scene = runner.build(args)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    try:
+        os.makedirs(args.out, exist_ok=True)
+    except OSError as e:
+        print(f"error: --out {args.out!r}: cannot create the directory ({e}).",
+              file=sys.stderr)  # fmt: skip
         return 2
 
     import jax
@@ -329,7 +339,6 @@ def _run_scene(args: argparse.Namespace) -> int:
     stats = {k: int(v) for k, v in traj.stats.items()}
 
     # -- outputs
-    os.makedirs(args.out, exist_ok=True)
     stem = args.scene.replace("-", "_")
     png = os.path.join(args.out, stem + ".png")
     npz = os.path.join(args.out, stem + ".npz")

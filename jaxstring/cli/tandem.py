@@ -425,7 +425,14 @@ def run_tanker(
             file=sys.stderr,
         )
         return 2
-    os.makedirs(out_dir, exist_ok=True)
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        print(
+            f"error: --out {out_dir!r}: cannot create the directory ({e}).",
+            file=sys.stderr,
+        )
+        return 2
     start = time.perf_counter()
     if name in LINE_SCENES:
         lines, ok = RUNNERS[name](out_dir, quick, hawser, frames)

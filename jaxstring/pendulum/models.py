@@ -25,7 +25,7 @@ from jaxtyping import Array, Float
 from .._geometry import direction, safe_norm
 from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
 from .._model import AbstractModel
-from .._validate import check_int, check_positive
+from .._validate import check_int, check_positive, check_shape
 from .effects import (
     AbstractStringLoad,
     AbstractTensionLaw,
@@ -130,10 +130,9 @@ class AbstractString(AbstractModel):
 
 
 def _check_string(model) -> None:
-    check_positive("l", model.l, "m")
-    check_positive("mu", model.mu, "kg/m")
-    check_positive("m_s", model.m_s, "kg")
-    check_positive("EA", model.EA, "N")
+    for name, unit in (("l", "m"), ("mu", "kg/m"), ("m_s", "kg"), ("EA", "N")):
+        check_shape(name, getattr(model, name), (), unit)
+        check_positive(name, getattr(model, name), unit)
     check_int("k", model.k, 2)
     if model.dim not in (2, 3):
         raise ValueError(f"`dim` must be 2 or 3; got {model.dim!r}.")

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._validate import check_nonnegative, check_positive
+from .._validate import check_nonnegative, check_positive, check_shape
 from .vessels import (
     AbstractActuator,
     current_at,
@@ -98,6 +98,8 @@ class NonlinearCompensator(AbstractActuator):
     internal_effects: tuple | None = None
 
     def __check_init__(self):
+        check_shape("K_P", self.K_P, (2,), "(span, heading)")
+        check_shape("K_D", self.K_D, (2,), "(span, heading)")
         check_nonnegative("K_P", self.K_P, "s^-2")
         check_nonnegative("K_D", self.K_D, "s^-1")
         check_positive("d_ref", self.d_ref, "m")
@@ -108,6 +110,8 @@ class NonlinearCompensator(AbstractActuator):
     @classmethod
     def from_bandwidth(cls, omega=0.05, zeta=1.0, **kw):
         """Gains K_P = omega^2, K_D = 2 zeta omega (rad/s), both channels."""
+        check_nonnegative("omega", omega, "rad/s")
+        check_nonnegative("zeta", zeta)
         omega = jnp.broadcast_to(jnp.asarray(omega, dtype=jnp.float64), (2,))
         zeta = jnp.broadcast_to(jnp.asarray(zeta, dtype=jnp.float64), (2,))
         return cls(K_P=omega**2, K_D=2 * zeta * omega, **kw)
@@ -148,6 +152,8 @@ class ComputedForcePD(AbstractActuator):
     N_max: Float[Array, ""] = _param(1.0e8)
 
     def __check_init__(self):
+        check_shape("K_P", self.K_P, (2,), "(span, heading)")
+        check_shape("K_D", self.K_D, (2,), "(span, heading)")
         check_nonnegative("K_P", self.K_P, "s^-2")
         check_nonnegative("K_D", self.K_D, "s^-1")
         check_positive("d_ref", self.d_ref, "m")
@@ -157,6 +163,8 @@ class ComputedForcePD(AbstractActuator):
     @classmethod
     def from_bandwidth(cls, omega=0.05, zeta=1.0, **kw):
         """Gains K_P = omega^2, K_D = 2 zeta omega (rad/s), both channels."""
+        check_nonnegative("omega", omega, "rad/s")
+        check_nonnegative("zeta", zeta)
         omega = jnp.broadcast_to(jnp.asarray(omega, dtype=jnp.float64), (2,))
         zeta = jnp.broadcast_to(jnp.asarray(zeta, dtype=jnp.float64), (2,))
         return cls(K_P=omega**2, K_D=2 * zeta * omega, **kw)

@@ -112,11 +112,11 @@ class TandemLine(AbstractModel):
 
     def __init__(self, tandem, line, controller_hawser=None):
         if not isinstance(tandem, Tandem):
-            raise ValueError("`tandem` must be a `Tandem`.")
+            raise ValueError(f"`tandem` must be a `Tandem`; got {tandem!r}.")
         if not isinstance(line, AbstractTether):
             raise ValueError(
                 "`line` must be a jaxstring tether model (LmsTether, ExactTether, "
-                "AceamTether)."
+                f"AceamTether); got {line!r}."
             )
         if not (
             isinstance(line.root, CoupledEnd) and isinstance(line.fast, CoupledEnd)
@@ -133,7 +133,10 @@ class TandemLine(AbstractModel):
             else:
                 controller_hawser = Hawser(l0=line.L)
         if not isinstance(controller_hawser, Hawser):
-            raise ValueError("`controller_hawser` must be a `Hawser` or None.")
+            raise ValueError(
+                f"`controller_hawser` must be a `Hawser` or None; got "
+                f"{controller_hawser!r}."
+            )
         self.tandem = tandem
         self.line = line
         self.controller_hawser = controller_hawser

@@ -5,6 +5,7 @@ wind blowing toward `pi + Delta_w`, so `Delta_w` is the angle between where the
 wind and where the current come from.
 """
 
+import inspect
 import math
 
 import jax.numpy as jnp
@@ -137,6 +138,12 @@ def tandem_fpso_alone(
     """
     check_positive("U_c", U_c, "m/s")
     check_finite("psi0_deg", psi0_deg)
+    check_finite("x_t_over_L", x_t_over_L)
+    if abs(float(x_t_over_L)) > 0.5:
+        raise ValueError(
+            "`x_t_over_L` must lie on the hull, in [-0.5, 0.5]; got "
+            f"{float(x_t_over_L)!r}."
+        )
     fpso = fpso_hull()
     model = MooredFPSO(fpso=fpso, x_t=x_t_over_L * fpso.L)
     effects = (ShortWingCurrent(), TurretMooring(k_m=k_m, c_m=c_m))
@@ -174,14 +181,35 @@ def tandem_equilibria(
     )
 
 
-def _hawser_kind(scene, hawser, line_options):
+def _check_hawser(hawser, line_options):
+    """Check `hawser` and `line_options` before a scene is built."""
     check_choice("hawser", hawser, HAWSER_KINDS)
-    if hawser == "massless":
-        if line_options:
+    if line_options is not None and not isinstance(line_options, dict):
+        raise ValueError(
+            f"`line_options` must be a dict of `with_line` options; got "
+            f"{line_options!r}."
+        )
+    if line_options:
+        valid = [
+            k
+            for k in inspect.signature(with_line).parameters
+            if k not in ("scene", "name")
+        ]
+        unknown = sorted(set(line_options) - set(valid))
+        if unknown:
+            raise ValueError(
+                f"unknown `line_options` {', '.join(map(repr, unknown))}; valid: "
+                f"{', '.join(map(repr, valid))}."
+            )
+        if hawser == "massless":
             raise ValueError(
                 "`line_options` apply only with hawser='line'; got "
                 f"{sorted(line_options)}."
             )
+
+
+def _hawser_kind(scene, hawser, line_options):
+    if hawser == "massless":
         return scene
     return with_line(scene, name=scene.name, **(line_options or {}))
 
@@ -206,6 +234,7 @@ def tandem_fishtail(
     the massless equilibrium's span)."""
     check_finite("perturbation_deg", perturbation_deg)
     check_positive("U_c", U_c, "m/s")
+    _check_hawser(hawser, line_options)
     model = tandem_model()
     eff, env = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
     y0 = aligned_equilibrium(model, eff, env, F_ast=F_ast)
@@ -268,8 +297,9 @@ def tandem_controlled(
     check_positive("omega", omega, "rad/s")
     check_positive("zeta", zeta)
     check_positive("span0", span0, "m")
+    check_finite("shuttle_offset_deg", shuttle_offset_deg)
     V_w, Dw = ENVIRONMENTS[env]
-    check_choice("hawser", hawser, HAWSER_KINDS)
+    _check_hawser(hawser, line_options)
     model = tandem_model()
     spec_hawser = Hawser()
     d_ref = spec_hawser.l0 + spec_hawser.stretch_for_tension(T_ref)

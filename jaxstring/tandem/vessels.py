@@ -48,6 +48,7 @@ from .._validate import (
     check_finite,
     check_nonnegative,
     check_positive,
+    check_shape,
     is_concrete,
 )
 
@@ -521,8 +522,9 @@ class LinearDamping(AbstractVesselLoad):
     shuttle: Float[Array, "3"] = _param((0.0, 0.0, 0.0))
 
     def __check_init__(self):
-        check_nonnegative("fpso", self.fpso)
-        check_nonnegative("shuttle", self.shuttle)
+        for name in ("fpso", "shuttle"):
+            check_shape(name, getattr(self, name), (3,), "(d_u, d_v, d_r)")
+            check_nonnegative(name, getattr(self, name))
 
     def forces(self, t, kin, env):
         del t, env
@@ -724,7 +726,10 @@ class Tandem(AbstractModel):
 
     def __check_init__(self):
         if not isinstance(self.fpso, Hull) or not isinstance(self.shuttle, Hull):
-            raise ValueError("`fpso` and `shuttle` must be `Hull`s.")
+            raise ValueError(
+                "`fpso` and `shuttle` must be `Hull`s; got "
+                f"{type(self.fpso).__name__} and {type(self.shuttle).__name__}."
+            )
         _check_point("x_t", self.x_t, self.fpso.L)
         _check_point("x_h1", self.x_h1, self.fpso.L)
         _check_point("x_h2", self.x_h2, self.shuttle.L)
@@ -799,7 +804,7 @@ class MooredFPSO(AbstractModel):
 
     def __check_init__(self):
         if not isinstance(self.fpso, Hull):
-            raise ValueError("`fpso` must be a `Hull`.")
+            raise ValueError(f"`fpso` must be a `Hull`; got {self.fpso!r}.")
         _check_point("x_t", self.x_t, self.fpso.L)
 
     def hulls(self):

@@ -59,6 +59,7 @@ from .._validate import (
     check_int,
     check_nonnegative,
     check_positive,
+    check_shape,
     is_concrete,
 )
 from .effects import AbstractTetherLoad, TetherKinematics
@@ -638,6 +639,8 @@ def _loads(effects):
 
 def _check_tether(model: AbstractTether) -> None:
     check_int("N", model.N, 2)
+    for name in ("L", "d", "mass_per_length", "added_mass"):
+        check_shape(name, getattr(model, name), ())
     check_positive("L", model.L, "m")
     check_positive("d", model.d, "m")
     check_positive("mass_per_length", model.mass_per_length, "kg/m")

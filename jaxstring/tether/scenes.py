@@ -105,7 +105,10 @@ def _tether_model(
         )
     if method == "exact":
         return TETHER_METHODS[method](omega=omega, k=k, end_links=end_links, **common)
-    k_lms = 40.0 * k if k_lms is None else k_lms
+    if k_lms is None:
+        k_lms = 40.0 * k
+    else:
+        check_positive("k_lms", k_lms, "N")
     return TETHER_METHODS[method](k=k_lms, c=c_lms, **common)
 
 
@@ -228,8 +231,30 @@ def tether_winch(
         t = np.asarray(times, float)
         if t.shape != (5,):
             raise ValueError(
-                "`times` must have the paper's 5 knots when `released` is not given."
+                "`times` must have the paper's 5 knots when `released` is not given; "
+                f"got {times!r}."
             )
+        # The released length must stay within [2 link lengths, L] (the running
+        # end is attached: N + 1 links).
+        N = kw.get("N", 101)
+        check_int("N", N, 2)
+        check_positive("L", L, "m")
+        if np.all(np.diff(t) > 0):  # else PrescribedEnd refuses `times`
+            haul_max = (L - 2 * L / (N + 1)) / (t[2] - t[1])
+            if haul_speed > haul_max:
+                raise ValueError(
+                    f"`haul_speed` must be <= {haul_max:g} m/s (hauling in for "
+                    f"{t[2] - t[1]:g} s leaves 2 links of L = {L:g} m); got "
+                    f"{haul_speed!r}."
+                )
+            payout_max = haul_speed * (t[2] - t[1]) / (t[4] - t[3])
+            if payout_speed > payout_max * (1 + 1e-12):
+                raise ValueError(
+                    f"`payout_speed` must be <= {payout_max:g} m/s (paying out for "
+                    f"{t[4] - t[3]:g} s after hauling in "
+                    f"{haul_speed * (t[2] - t[1]):g} m returns to L = {L:g} m); got "
+                    f"{payout_speed!r}."
+                )
         hauled = L - haul_speed * (t[2] - t[1])
         released = (L, L, hauled, hauled, hauled + payout_speed * (t[4] - t[3]))
     return tether_fixed(
