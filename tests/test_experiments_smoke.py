@@ -114,8 +114,8 @@ def test_fig9_quick(results_in_tmp):
     js = [r for r in rows if r["solver"] == "kvaerno5"]
     assert {r["formulation"] for r in js} == {"displacement", "angle"}
     assert all(r["ok"] and r["err_m"] < 1e-5 for r in js)
-    best = [r for r in rows if r["best"]]
-    assert min(r["cpu_rel"] for r in best if r["EA"] == 1e4) == pytest.approx(1.0)
+    # The formulation gap itself is asserted on step counts at the paper's
+    # settings in tests/test_formulation_gap.py.
 
 
 @pytest.mark.skipif(not HAS_SUNDAE, reason="scikit-sundae (bench extra) not installed")
