@@ -9,7 +9,12 @@ Writes results/tanker_controlled.{md,csv} and one figure per environment,
 results/tanker_controlled_<env>.png (--quick: results/quick/, names ending in
 `_quick`).
 
-    python experiments/tanker_controlled.py [--quick]
+`--mismatch` runs the model-mismatch study alone instead: the compensator's model
+has C_Y and the wind areas each 20 % high or low (four combinations), law B
+without integral action and with K_I = omega^3/10, in every environment (--quick:
+15 m/s wind from 180 deg only); writes results/tanker_controlled_mismatch.{md,csv}.
+
+    python experiments/tanker_controlled.py [--quick] [--mismatch]
 """
 
 import os
@@ -20,7 +25,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import time
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,8 +33,11 @@ from _common import results_dir, set_quick, stamp_markdown
 import jaxstring as js
 from jaxstring.tandem import plot as tp
 from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
-from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled, tandem_model
-from jaxstring.tandem.vessels import fpso_hull, shuttle_hull
+from jaxstring.tandem.scenes import (
+    ENVIRONMENTS,
+    tandem_controlled,
+    with_model_mismatch,
+)
 
 
 KEYS = CONTROLLED_METRICS
@@ -73,28 +80,72 @@ def run(scene, solver="tsit5", repeats=1, n_save=None):
 def mismatched(scene, factor_cy=1.2, factor_wind=0.8):
     """The same scene, but the compensator's internal model has C_Y x factor_cy and
     wind areas x factor_wind on both hulls (spec S4 recommended test)."""
-    f, s = fpso_hull(), shuttle_hull()
-    f = eqx.tree_at(
-        lambda h: (h.C_Y, h.A_F, h.A_L),
-        f,
-        (f.C_Y * factor_cy, f.A_F * factor_wind, f.A_L * factor_wind),
-    )
-    s = eqx.tree_at(
-        lambda h: (h.C_Y, h.A_F, h.A_L),
-        s,
-        (s.C_Y * factor_cy, s.A_F * factor_wind, s.A_L * factor_wind),
-    )
-    ctl = eqx.tree_at(
-        lambda c: c.internal_model,
-        scene.effects[-1],
-        tandem_model(fpso=f, shuttle=s),
-        is_leaf=lambda x: x is None,
-    )
-    return eqx.tree_at(lambda sc: sc.effects[-1], scene, ctl)
+    return with_model_mismatch(scene, factor_cy, factor_wind)
 
 
-def main(quick=False):
+FACTORS = ((1.2, 0.8), (0.8, 1.2), (1.2, 1.2), (0.8, 0.8))
+
+
+def mismatch_study(quick=False, omega=0.05, t1=6000.0):
+    """Law B with a wrong internal model, without and with integral action
+    (K_I = omega^3/10, s^-3): the S4 acceptance after 3000 s."""
+    sfx = "_quick" if quick else ""
+    K_I = omega**3 / 10
+    envs = ("wind15_180",) if quick else tuple(ENVIRONMENTS)
+    lines = [
+        "Law B believes C_Y and the wind areas off by the factors; the plant keeps "
+        f"the nominal ones. K_I = omega^3/10 = {K_I:.3g} s^-3 (omega = {omega} "
+        "rad/s) on both channels, anti-windup by back-calculation "
+        "(K_aw = 1/omega^2).",
+        "",
+        "| env | C_Y x | wind area x | K_I s^-3 | |d-dref| m | |y2| deg | d_min m "
+        "| clearance m | |X|max kN | psi1 end deg | X end kN | ok | run s |",
+        "|" + "---|" * 13,
+    ]
+    rows = []
+    for env in envs:
+        for fc, fw in FACTORS:
+            for k_i in (None, K_I):
+                sc = with_model_mismatch(
+                    tandem_controlled(env=env, t1=t1, omega=omega, K_I=k_i), fc, fw
+                )
+                ctl = sc.effects[-1]
+                traj, _, run_s = run(sc)
+                m = controlled_metrics(traj, float(ctl.d_ref), ctl.X_max, ctl.N_max)
+                k_txt = "0" if k_i is None else f"{k_i:.3g}"
+                lines.append(
+                    f"| {env} | {fc} | {fw} | {k_txt} | {m['span_error']:.3g} | "
+                    f"{m['heading_error']:.3g} | {m['span_min']:.2f} | "
+                    f"{m['clearance_min']:.1f} | {m['X_peak'] / 1e3:.0f} | "
+                    f"{m['psi1_final']:.2f} | {m['X_final'] / 1e3:.0f} | "
+                    f"{m['ok']} | {run_s:.2f} |"
+                )
+                rows.append((env, fc, fw, 0.0 if k_i is None else k_i, m))
+    text = "\n".join(lines)
+    print(text)
+    out = results_dir()
+    with open(os.path.join(out, f"tanker_controlled_mismatch{sfx}.md"), "w") as f:
+        f.write(
+            "# S4 with model mismatch, without and with integral action\n\n"
+            + stamp_markdown()
+            + "\n\n"
+            + text
+            + "\n"
+        )
+    with open(os.path.join(out, f"tanker_controlled_mismatch{sfx}.csv"), "w") as f:
+        f.write("env,factor_C_Y,factor_wind_area,K_I," + ",".join(KEYS) + "\n")
+        for env, fc, fw, k_i, m in rows:
+            vals = [
+                f"{m[k]:.6g}" if isinstance(m[k], float) else str(m[k]) for k in KEYS
+            ]
+            f.write(f"{env},{fc},{fw},{k_i:.6g}," + ",".join(vals) + "\n")
+    return rows
+
+
+def main(quick=False, mismatch=False):
     set_quick(quick)
+    if mismatch:
+        return mismatch_study(quick)
     sfx = "_quick" if quick else ""
     t1 = 4000.0 if quick else 6000.0
     rows, lines, compile_s = [], [], {}
@@ -172,5 +223,10 @@ def main(quick=False):
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
+    p.add_argument(
+        "--mismatch",
+        action="store_true",
+        help="only the model-mismatch study, without and with integral action",
+    )
     a = p.parse_args()
-    main(quick=a.quick)
+    main(quick=a.quick, mismatch=a.mismatch)

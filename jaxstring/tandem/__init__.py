@@ -20,6 +20,7 @@ from .analysis import (
 from .autopilot import (
     ComputedForcePD as ComputedForcePD,
     NonlinearCompensator as NonlinearCompensator,
+    TandemWithIntegrator as TandemWithIntegrator,
 )
 from .line import (
     TandemLine as TandemLine,
@@ -35,6 +36,7 @@ from .scenes import (
     tandem_fishtail as tandem_fishtail,
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
+    with_model_mismatch as with_model_mismatch,
 )
 from .vessels import (
     AbstractActuator as AbstractActuator,
@@ -65,6 +67,7 @@ __all__ = [
     "stability",
     "ComputedForcePD",
     "NonlinearCompensator",
+    "TandemWithIntegrator",
     "TandemLine",
     "hawser_line",
     "line_equilibrium",
@@ -76,6 +79,7 @@ __all__ = [
     "tandem_fishtail",
     "tandem_fpso_alone",
     "tandem_hopf",
+    "with_model_mismatch",
     "AbstractActuator",
     "AbstractVesselLoad",
     "ConstantThrust",

@@ -8,12 +8,13 @@ wind and where the current come from.
 import inspect
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from .._environment import Environment, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
-from .autopilot import ComputedForcePD, NonlinearCompensator
+from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
 from .line import HAWSER_KINDS, with_line
 from .vessels import (
     AbstractVesselLoad,
@@ -283,6 +284,7 @@ def tandem_controlled(
     U_c=1.0,
     hawser="massless",
     line_options=None,
+    K_I=None,
 ) -> Scene:
     """S4: the shuttle under the nonlinear compensator (law "B") or the computed
     force PD (law "A"), in one of `ENVIRONMENTS`.
@@ -290,9 +292,19 @@ def tandem_controlled(
     The span reference is d_ref = l0 + delta(T_ref) (81.47 m at 300 kN); the
     heading reference is the hawser bearing. Gains: K_P = omega^2, K_D = 2 zeta
     omega on both channels. `hawser="line"`: as in `tandem_fishtail` (the
-    controller keeps the massless hawser as its model of the line)."""
+    controller keeps the massless hawser as its model of the line).
+
+    `K_I` (s^-3, scalar or one per channel; law B with the massless hawser only):
+    integral action; the model is then a `TandemWithIntegrator` (14 states, the
+    integrators starting at 0). The spec's setting for model-error tests is
+    omega^3/10. None: no integral action."""
     check_choice("env", env, tuple(ENVIRONMENTS))
     check_choice("law", law, ("A", "B"))
+    if K_I is not None and (law != "B" or hawser != "massless"):
+        raise ValueError(
+            "`K_I` (integral action) needs law='B' and hawser='massless'; got "
+            f"law={law!r}, hawser={hawser!r}."
+        )
     check_positive("T_ref", T_ref, "N")
     check_positive("omega", omega, "rad/s")
     check_positive("zeta", zeta)
@@ -303,14 +315,63 @@ def tandem_controlled(
     model = tandem_model()
     spec_hawser = Hawser()
     d_ref = spec_hawser.l0 + spec_hawser.stretch_for_tension(T_ref)
-    cls = NonlinearCompensator if law == "B" else ComputedForcePD
-    ctl = cls.from_bandwidth(
-        omega=omega, zeta=zeta, d_ref=d_ref, X_max=X_max, N_max=N_max
-    )
+    kw = dict(omega=omega, zeta=zeta, d_ref=d_ref, X_max=X_max, N_max=N_max)
+    if law == "B":
+        ctl = NonlinearCompensator.from_bandwidth(K_I=K_I, **kw)
+    else:
+        ctl = ComputedForcePD.from_bandwidth(**kw)
     eff, env_ = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw)
     eff = eff + (spec_hawser, TurretMooring(), ctl)
     y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
+    if K_I is not None:
+        model = TandemWithIntegrator(model)
+        y0 = jnp.concatenate([y0, jnp.zeros(2)])
     sc = Scene(
         model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled", env=env_
     )
     return _hawser_kind(sc, hawser, line_options)
+
+
+def with_model_mismatch(scene, C_Y_factor=1.2, wind_area_factor=0.8) -> Scene:
+    """The S4 `scene` with the compensator believing a wrong model (spec S4,
+    recommended test): its internal model has the cross-flow drag coefficient
+    C_Y x `C_Y_factor` and the wind areas A_F, A_L x `wind_area_factor` on both
+    hulls, while the plant keeps the nominal ones. Needs a `NonlinearCompensator`
+    (law B) in the scene."""
+    check_positive("C_Y_factor", C_Y_factor)
+    check_positive("wind_area_factor", wind_area_factor)
+    idx = [
+        i for i, e in enumerate(scene.effects) if isinstance(e, NonlinearCompensator)
+    ]
+    if len(idx) != 1:
+        raise ValueError(
+            "`with_model_mismatch` needs a scene with one NonlinearCompensator (law B)."
+        )
+    plant = (
+        scene.model.plant
+        if isinstance(scene.model, TandemWithIntegrator)
+        else scene.model
+    )
+    if not isinstance(plant, Tandem):
+        raise ValueError("`with_model_mismatch` needs a Tandem scene.")
+
+    def believed(h):
+        return eqx.tree_at(
+            lambda h: (h.C_Y, h.A_F, h.A_L),
+            h,
+            (h.C_Y * C_Y_factor, h.A_F * wind_area_factor, h.A_L * wind_area_factor),
+        )
+
+    internal = eqx.tree_at(
+        lambda m: (m.fpso, m.shuttle),
+        plant,
+        (believed(plant.fpso), believed(plant.shuttle)),
+    )
+    i = idx[0]
+    ctl = eqx.tree_at(
+        lambda c: c.internal_model,
+        scene.effects[i],
+        internal,
+        is_leaf=lambda x: x is None,
+    )
+    return eqx.tree_at(lambda sc: sc.effects[i], scene, ctl)
