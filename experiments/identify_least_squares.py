@@ -28,7 +28,6 @@ import sys
 import time
 
 import _common as common
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -41,15 +40,6 @@ from tests.test_reference_scipy import _ReferenceString  # noqa: E402
 
 K, EA, ALPHA, T1, N_SAMPLES, NOISE = 16, 1e3, 0.05, 2.0, 100, 5e-4
 START = dict(alpha=0.07, EA=1.4e3)
-
-
-class EndMassResidual(eqx.Module):
-    """Model minus measured end-mass positions, m."""
-
-    data: jnp.ndarray
-
-    def __call__(self, traj, scene):
-        return (traj.end_mass - self.data).ravel()
 
 
 def reference_end_mass(ts):
@@ -65,7 +55,7 @@ def fit(data, ts):
     t0 = time.perf_counter()
     res = js.least_squares(
         start,
-        EndMassResidual(jnp.asarray(data)),
+        js.Misfit(jnp.asarray(data)),
         ["alpha", "EA"],
         ts=ts,
         rtol=1e-6,

@@ -27,7 +27,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 
-import equinox as eqx
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
@@ -40,17 +39,6 @@ from _common import results_dir, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring import _fit
-
-
-class Residual(eqx.Module):
-    """Model positions minus measured positions at the measured nodes, m."""
-
-    data: jnp.ndarray
-    nodes: tuple = eqx.field(static=True)
-
-    def __call__(self, traj, scene):
-        del scene
-        return traj.obs["positions"][:, list(self.nodes), :] - self.data
 
 
 def bounce_scene(formulation, k, alpha, EA, t1, eps0):
@@ -90,7 +78,7 @@ def main(
         k_fit, steps = 4, 10
     k_data = 2 * k_fit
     ts, clean, data = measurements(alpha, EA, k_data, t1, n_t, noise, eps0)
-    res = Residual(data=jnp.asarray(data), nodes=(k_fit // 2, k_fit))
+    res = js.Misfit(jnp.asarray(data), "positions", nodes=(k_fit // 2, k_fit))
     loss = lambda traj, scene: jnp.sum(res(traj, scene) ** 2) / noise**2
     rows = []
     fits = {}

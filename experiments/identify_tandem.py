@@ -8,12 +8,13 @@ standard deviations right?
 Scene: `tandem_fishtail` (spec S3a: 1 m/s current from astern of the FPSO, no
 thrust, massless hawser), from the aligned equilibrium with the shuttle turned
 2.5 deg; the first 3000 s, in which the growing fishtailing swings the shuttle
-heading to +6.5 and -12 deg and the FPSO's to -2.5 deg. Data: both headings every 10 s (301 samples) from Dopri5 at
-rtol = atol = 1e-11, with 0.1 deg Gaussian noise. The fit integrates with Tsit5 at
-rtol = atol = 1e-8 (spec S5: the tandem is not stiff) and starts 30 % off
-(FPSO C_Y x 1.3, shuttle C_Y x 0.7); Levenberg-Marquardt on log C_Y with
-forward-mode Jacobians, tolerance 1e-5. The start state is the measured one: it
-stays at the true aligned equilibrium while the coefficients change.
+heading to +6.5 and -12 deg and the FPSO's to -2.5 deg. Data: both headings
+every 10 s (301 samples) from Dopri5 at rtol = atol = 1e-11, with 0.1 deg
+Gaussian noise. The fit integrates with Tsit5 at rtol = atol = 1e-8 (spec S5:
+the tandem is not stiff) and starts 30 % off (FPSO C_Y x 1.3, shuttle C_Y x
+0.7); Levenberg-Marquardt on log C_Y with forward-mode Jacobians, tolerance
+1e-5. The start state is the measured one: it stays at the true aligned
+equilibrium while the coefficients change.
 
 One fit is timed including compilation, then the compiled fit runs on further
 noise seeds; the scatter of their estimates is compared with the reported standard

@@ -21,6 +21,7 @@ from ._environment import (
 )
 from ._fit import (
     FitResult as FitResult,
+    Misfit as Misfit,
     fit as fit,
     gauss_newton as gauss_newton,
     value_and_grad as value_and_grad,

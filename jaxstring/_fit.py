@@ -167,6 +167,29 @@ class FitResult(eqx.Module):
         return {n: float(v[-1]) for n, v in self.params.items()}
 
 
+class Misfit(eqx.Module):
+    """The residual `model - data` of a trajectory, for `fit`, `least_squares` and
+    `gauss_newton`: `Misfit(data)(traj, scene)` is `traj.end_mass - data`.
+
+    **Fields:** `data`, the measurements at the saved times `ts` (an array leaf,
+    traced: one compiled fit serves every data set of the same shape);
+    `observable`, the name of a trajectory observable (`"end_mass"`, or a key of
+    `traj.obs` such as `"positions"`, `"heading"`); `nodes`, indices along the
+    observable's second axis to compare (None: all of it).
+    """
+
+    data: Any
+    observable: str = eqx.field(static=True, default="end_mass")
+    nodes: tuple | None = eqx.field(static=True, default=None)
+
+    def __call__(self, traj, scene):
+        del scene
+        x = getattr(traj, self.observable)
+        if self.nodes is not None:
+            x = x[:, list(self.nodes)]
+        return x - self.data
+
+
 def _to_theta(diff, pos):
     return jtu.tree_map(lambda x, p: jnp.log(x) if p else x, diff, pos)
 

@@ -1,7 +1,6 @@
 """fit and gradients: derivatives against finite differences; identification of
 alpha and EA from noisy positions of a finer, independently integrated string."""
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optax
@@ -56,15 +55,6 @@ def test_adjoints_agree_on_the_gradient():
         assert abs(g_rev[name] - g_fwd[name]) <= 1e-9 * abs(g_fwd[name]), name
 
 
-class _PositionResidual(eqx.Module):
-    data: jnp.ndarray
-    nodes: tuple = eqx.field(static=True)
-
-    def __call__(self, traj, scene):
-        del scene
-        return traj.obs["positions"][:, list(self.nodes), :] - self.data
-
-
 def _bounce(formulation, k, alpha, EA, t1, eps0=0.05):
     """The pendulum hanging at rest, stretched to `eps0`, released: the end mass
     bounces on the string (its frequency carries EA, its decay alpha)."""
@@ -97,7 +87,7 @@ def test_identify_alpha_and_EA_from_a_finer_string():
     assert truth.ok, truth.status
     clean = np.asarray(truth.positions[:, [k_fit, 2 * k_fit], :])
     data = clean + noise * np.random.default_rng(0).standard_normal(clean.shape)
-    residual = _PositionResidual(data=jnp.asarray(data), nodes=(k_fit // 2, k_fit))
+    residual = js.Misfit(jnp.asarray(data), "positions", nodes=(k_fit // 2, k_fit))
     loss = lambda traj, scene: jnp.sum(residual(traj, scene) ** 2) / noise**2
     result = _fit.fit(
         _bounce("angle", k_fit, 0.7 * alpha, 1.3 * EA, t1),

@@ -16,15 +16,6 @@ TS = jnp.linspace(0.0, 0.3, 16)
 TRUTH = dict(EA=1e3, alpha=0.05)
 
 
-class EndMassResidual(eqx.Module):
-    """Model minus measured end-mass positions, m (data traced, not compiled in)."""
-
-    data: jnp.ndarray
-
-    def __call__(self, traj, scene):
-        return (traj.end_mass - self.data).ravel()
-
-
 def _scene(theta0=np.pi / 2, **kw):
     p = dict(TRUTH, **kw)
     return js.pendulum.string_pendulum(
@@ -42,7 +33,7 @@ def _data(theta0=np.pi / 2):
 
 def test_recovers_known_parameters_from_a_start_40_percent_off():
     start = _scene(EA=1.4e3, alpha=0.03)
-    res = js.least_squares(start, EndMassResidual(_data()), ["alpha", "EA"], ts=TS)
+    res = js.least_squares(start, js.Misfit(_data()), ["alpha", "EA"], ts=TS)
     assert res.converged, res.message
     assert res.values["alpha"] == pytest.approx(TRUTH["alpha"], rel=1e-4)
     assert res.values["EA"] == pytest.approx(TRUTH["EA"], rel=1e-4)
@@ -56,14 +47,14 @@ def test_covariance_is_the_gauss_newton_one_with_a_finite_difference_jacobian():
     sigma = 1e-4
     noisy = _data() + sigma * rng.standard_normal(_data().shape)
     res = js.least_squares(
-        _scene(), EndMassResidual(noisy), ["alpha", "EA"], ts=TS, sigma=sigma
+        _scene(), js.Misfit(noisy), ["alpha", "EA"], ts=TS, sigma=sigma
     )
     assert res.converged, res.message
 
     def residuals(alpha, EA):
         sc = _scene(alpha=alpha, EA=EA)
         traj = js.simulate(sc, "kvaerno5", rtol=1e-8, atol=1e-8, ts=TS)
-        return np.asarray(EndMassResidual(noisy)(traj, sc))
+        return np.asarray(js.Misfit(noisy)(traj, sc)).ravel()
 
     a, e = res.values["alpha"], res.values["EA"]
     ha, he = 1e-4 * a, 1e-4 * e
@@ -106,7 +97,7 @@ class _TwoData(eqx.Module):
 def test_an_iteration_limit_is_reported_not_raised():
     start = _scene(EA=1.4e3, alpha=0.03)
     res = js.least_squares(
-        start, EndMassResidual(_data()), ["alpha", "EA"], ts=TS, max_iters=1
+        start, js.Misfit(_data()), ["alpha", "EA"], ts=TS, max_iters=1
     )
     assert not res.converged
     assert "max_iters" in res.message
@@ -129,7 +120,7 @@ def test_an_iteration_limit_is_reported_not_raised():
 def test_bad_input_names_the_argument(kwargs, match):
     args = dict(
         scene=_scene(),
-        residual_fn=EndMassResidual(_data()),
+        residual_fn=js.Misfit(_data()),
         params=["alpha", "EA"],
         ts=TS,
     )

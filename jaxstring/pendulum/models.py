@@ -51,14 +51,17 @@ class AbstractString(AbstractModel):
     parameters; `k` (number of elements) and `dim` (2 or 3) are structure.
     """
 
-    l: eqx.AbstractVar[Float[Array, ""]]
-    mu: eqx.AbstractVar[Float[Array, ""]]
-    m_s: eqx.AbstractVar[Float[Array, ""]]
-    EA: eqx.AbstractVar[Float[Array, ""]]
-    k: eqx.AbstractVar[int]
-    dim: eqx.AbstractVar[int]
+    l: Float[Array, ""] = _param()
+    mu: Float[Array, ""] = _param()
+    m_s: Float[Array, ""] = _param()
+    EA: Float[Array, ""] = _param()
+    k: int = eqx.field(static=True)
+    dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str]
     accepts: ClassVar[tuple[type, ...]] = (AbstractStringLoad, AbstractTensionLaw)
+
+    def __check_init__(self):
+        _check_string(self)
 
     def state_shape(self):
         return jnp.shape(self.initial_state(0.0))
@@ -179,17 +182,8 @@ class DisplacementString(AbstractString):
     Tension is defined on the k elements.
     """
 
-    l: Float[Array, ""] = _param()
-    mu: Float[Array, ""] = _param()
-    m_s: Float[Array, ""] = _param()
-    EA: Float[Array, ""] = _param()
-    k: int = eqx.field(static=True)
-    dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "displacement"
     projects: ClassVar[bool] = False
-
-    def __check_init__(self):
-        _check_string(self)
 
     def initial_state(self, theta0):
         s = jnp.arange(1, self.k + 1) * (self.l / self.k)
@@ -419,17 +413,8 @@ class NaturalTangentString(AbstractString):
     w = sqrt(EA/mu) k/l of the axial waves: no new time scale, and drift decays.
     """
 
-    l: Float[Array, ""] = _param()
-    mu: Float[Array, ""] = _param()
-    m_s: Float[Array, ""] = _param()
-    EA: Float[Array, ""] = _param()
-    k: int = eqx.field(static=True)
-    dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "natural"
     projects: ClassVar[bool] = True
-
-    def __check_init__(self):
-        _check_string(self)
 
     def _split(self, y):
         d = self.dim
@@ -515,17 +500,10 @@ class NaturalAngleString(AbstractString):
     The unit-length constraint holds by construction.
     """
 
-    l: Float[Array, ""] = _param()
-    mu: Float[Array, ""] = _param()
-    m_s: Float[Array, ""] = _param()
-    EA: Float[Array, ""] = _param()
-    k: int = eqx.field(static=True)
-    dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str] = "angle"
     projects: ClassVar[bool] = False
 
     def __check_init__(self):
-        _check_string(self)
         if self.dim != 2:
             raise ValueError(
                 "`dim` must be 2 for the angle formulation; use formulation="

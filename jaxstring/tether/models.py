@@ -369,17 +369,20 @@ class AbstractTether(AbstractModel):
     released length L_r(t), m, or `None` for a fixed length) are structure.
     """
 
-    L: eqx.AbstractVar[Float[Array, ""]]
-    d: eqx.AbstractVar[Float[Array, ""]]
-    mass_per_length: eqx.AbstractVar[Float[Array, ""]]
-    added_mass: eqx.AbstractVar[Float[Array, ""]]
-    N: eqx.AbstractVar[int]
-    root: eqx.AbstractVar[AbstractEnd]
-    fast: eqx.AbstractVar[AbstractEnd]
-    released: eqx.AbstractVar[PiecewiseLinear | None]
+    L: Float[Array, ""] = _param()
+    d: Float[Array, ""] = _param()
+    mass_per_length: Float[Array, ""] = _param()
+    added_mass: Float[Array, ""] = _param(default=1.0)
+    N: int = eqx.field(static=True, default=101)
+    root: AbstractEnd = eqx.field(default_factory=lambda: FixedEnd(jnp.zeros(3)))
+    fast: AbstractEnd = eqx.field(default_factory=FreeEnd)
+    released: PiecewiseLinear | None = None
     method: ClassVar[str]
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (AbstractTetherLoad,)
+
+    def __check_init__(self):
+        _check_tether(self)
 
     # -- derived sizes (properties of the parameters, so they stay differentiable)
     @property
@@ -704,22 +707,13 @@ class AceamTether(AbstractTether):
     links' errors cancel in the sum): it measures the end forces, not the regulator.
     """
 
-    L: Float[Array, ""] = _param()
-    d: Float[Array, ""] = _param()
-    mass_per_length: Float[Array, ""] = _param()
-    added_mass: Float[Array, ""] = _param(default=1.0)
     T: Float[Array, ""] = _param(default=0.1)
     T1: Float[Array, ""] = _param(default=0.025)
     k: Float[Array, ""] = _param(default=1e4)
-    N: int = eqx.field(static=True, default=101)
-    root: AbstractEnd = eqx.field(default_factory=lambda: FixedEnd(jnp.zeros(3)))
-    fast: AbstractEnd = eqx.field(default_factory=FreeEnd)
-    released: PiecewiseLinear | None = None
     feedforward: bool = eqx.field(static=True, default=False)
     method: ClassVar[str] = "aceam"
 
     def __check_init__(self):
-        _check_tether(self)
         check_positive("T", self.T, "s")
         check_positive("T1", self.T1, "s")
         check_positive("k", self.k, "N")
@@ -775,21 +769,12 @@ class ExactTether(AbstractTether):
     `CoupledEnd`).
     """
 
-    L: Float[Array, ""] = _param()
-    d: Float[Array, ""] = _param()
-    mass_per_length: Float[Array, ""] = _param()
-    added_mass: Float[Array, ""] = _param(default=1.0)
     omega: Float[Array, ""] = _param(default=20.0)
     k: Float[Array, ""] = _param(default=1e4)
-    N: int = eqx.field(static=True, default=101)
-    root: AbstractEnd = eqx.field(default_factory=lambda: FixedEnd(jnp.zeros(3)))
-    fast: AbstractEnd = eqx.field(default_factory=FreeEnd)
-    released: PiecewiseLinear | None = None
     end_links: str = eqx.field(static=True, default="rigid")
     method: ClassVar[str] = "exact"
 
     def __check_init__(self):
-        _check_tether(self)
         check_positive("omega", self.omega, "1/s")
         check_positive("k", self.k, "N")
         if self.end_links not in ("rigid", "spring"):
@@ -871,20 +856,11 @@ class LmsTether(AbstractTether):
     **Arguments:** as `AbstractTether`, plus `k` (N) and `c` (damping, N s; >= 0).
     """
 
-    L: Float[Array, ""] = _param()
-    d: Float[Array, ""] = _param()
-    mass_per_length: Float[Array, ""] = _param()
-    added_mass: Float[Array, ""] = _param(default=1.0)
     k: Float[Array, ""] = _param(default=4e5)
     c: Float[Array, ""] = _param(default=0.0)
-    N: int = eqx.field(static=True, default=101)
-    root: AbstractEnd = eqx.field(default_factory=lambda: FixedEnd(jnp.zeros(3)))
-    fast: AbstractEnd = eqx.field(default_factory=FreeEnd)
-    released: PiecewiseLinear | None = None
     method: ClassVar[str] = "lms"
 
     def __check_init__(self):
-        _check_tether(self)
         check_positive("k", self.k, "N")
         check_nonnegative("c", self.c, "N s")
 
