@@ -379,10 +379,13 @@ def run_study(main, doc, lists=None, **options):
     `options` maps main's keyword to argparse keywords (``default``, ``type``,
     ``help``, ``choices``; the flag is ``--keyword`` unless ``flag`` names it)."""
     import argparse
+    import inspect
 
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes")
-    parser.add_argument("--repeats", type=int, default=0, help="timing repeats")
+    takes_repeats = "repeats" in inspect.signature(main).parameters
+    if takes_repeats:
+        parser.add_argument("--repeats", type=int, default=0, help="timing repeats")
     for name in lists or {}:
         parser.add_argument(f"--{name}", default="", help="comma-separated")
     for name, kw in options.items():
@@ -391,8 +394,19 @@ def run_study(main, doc, lists=None, **options):
     args = vars(parser.parse_args())
     for name, conv in (lists or {}).items():
         args[name] = parse_list(args[name], conv)
-    args["repeats"] = args["repeats"] or None
+    if takes_repeats:
+        args["repeats"] = args["repeats"] or None
     return main(**args)
+
+
+def write_report(name: str, title: str, text: str, csv_lines=()):
+    """Print `text`; write it to `results/<name>.md` under `title` and the stamp,
+    and `csv_lines` (strings, header first) to `results/<name>.csv`."""
+    print(text)
+    out = results_dir()
+    (out / f"{name}.md").write_text(f"# {title}\n\n{stamp_markdown()}\n\n{text}\n")
+    if csv_lines:
+        (out / f"{name}.csv").write_text("\n".join(csv_lines) + "\n")
 
 
 def score_rows(rows, ref_end, baseline=None, **fields):

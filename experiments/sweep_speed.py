@@ -58,10 +58,10 @@ if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", "")
         os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
     ).strip()
 
-import argparse
 import statistics
 import time
 
+import _common as common
 import jax
 import numpy as np
 from _common import end_mass_error, new_figure, savefig, set_quick, write_table
@@ -204,6 +204,7 @@ def profile(k, Ms, quick):
 
 
 def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
+    quick = quick or bool(os.environ.get("SMOKE_TEST"))
     set_quick(quick)
     if failure_only:
         tag = "_quick" if quick else ""
@@ -441,15 +442,12 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument(
-        "--failure-only",
-        action="store_true",
-        help="only the failure-isolation table (sweep_speed_failure.*)",
-    )
-    a = p.parse_args()
-    main(
-        quick=a.quick or bool(os.environ.get("SMOKE_TEST")),
-        failure_only=a.failure_only,
+    common.run_study(
+        main,
+        __doc__,
+        failure_only=dict(
+            flag="failure-only",
+            action="store_true",
+            help="only the failure-isolation table (sweep_speed_failure.*)",
+        ),
     )

@@ -22,13 +22,12 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, set_quick, stamp_markdown
+from _common import results_dir, run_study, set_quick, write_report
 
 import jaxstring as js
 from jaxstring.tandem import plot as tp
@@ -61,6 +60,10 @@ def row(law, env, m, run_s):
         f"{run_s:.2f}",
     )
     return "| " + " | ".join(cells) + " |"
+
+
+def _cells(values):
+    return [f"{v:.6g}" if isinstance(v, float) else str(v) for v in values]
 
 
 def run(scene, solver="tsit5", repeats=1, n_save=None):
@@ -121,24 +124,15 @@ def mismatch_study(quick=False, omega=0.05, t1=6000.0):
                     f"{m['ok']} | {run_s:.2f} |"
                 )
                 rows.append((env, fc, fw, 0.0 if k_i is None else k_i, m))
-    text = "\n".join(lines)
-    print(text)
-    out = results_dir()
-    with open(os.path.join(out, f"tanker_controlled_mismatch{sfx}.md"), "w") as f:
-        f.write(
-            "# S4 with model mismatch, without and with integral action\n\n"
-            + stamp_markdown()
-            + "\n\n"
-            + text
-            + "\n"
-        )
-    with open(os.path.join(out, f"tanker_controlled_mismatch{sfx}.csv"), "w") as f:
-        f.write("env,factor_C_Y,factor_wind_area,K_I," + ",".join(KEYS) + "\n")
-        for env, fc, fw, k_i, m in rows:
-            vals = [
-                f"{m[k]:.6g}" if isinstance(m[k], float) else str(m[k]) for k in KEYS
-            ]
-            f.write(f"{env},{fc},{fw},{k_i:.6g}," + ",".join(vals) + "\n")
+    csv = ["env,factor_C_Y,factor_wind_area,K_I," + ",".join(KEYS)]
+    for env, fc, fw, k_i, m in rows:
+        csv.append(",".join(_cells((env, fc, fw, k_i, *[m[k] for k in KEYS]))))
+    write_report(
+        f"tanker_controlled_mismatch{sfx}",
+        "S4 with model mismatch, without and with integral action",
+        "\n".join(lines),
+        csv,
+    )
     return rows
 
 
@@ -207,26 +201,18 @@ def main(quick=False, mismatch=False):
             f"| {solver} | {int(traj.stats['num_steps'])} | {comp:.1f} | "
             f"{run_s:.3f} | {run_s / ref:.1f} |"
         )
-    text = "\n".join(lines)
-    print(text)
-    with open(os.path.join(results_dir(), f"tanker_controlled{sfx}.md"), "w") as f:
-        f.write("# S4 controlled tandem\n\n" + stamp_markdown() + "\n\n" + text + "\n")
-    with open(os.path.join(results_dir(), f"tanker_controlled{sfx}.csv"), "w") as f:
-        f.write("law,env," + ",".join(KEYS) + "\n")
-        for r in rows:
-            f.write(
-                ",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r)
-                + "\n"
-            )
+    csv = ["law,env," + ",".join(KEYS)] + [",".join(_cells(r)) for r in rows]
+    write_report(
+        f"tanker_controlled{sfx}", "S4 controlled tandem", "\n".join(lines), csv
+    )
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument(
-        "--mismatch",
-        action="store_true",
-        help="only the model-mismatch study, without and with integral action",
+    run_study(
+        main,
+        __doc__,
+        mismatch=dict(
+            action="store_true",
+            help="only the model-mismatch study, without and with integral action",
+        ),
     )
-    a = p.parse_args()
-    main(quick=a.quick, mismatch=a.mismatch)

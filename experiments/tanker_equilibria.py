@@ -24,11 +24,10 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse
 import time
 
 import numpy as np
-from _common import results_dir, set_quick, stamp_markdown
+from _common import results_dir, run_study, set_quick, write_report
 
 import jaxstring  # noqa: F401
 from jaxstring.cli.tandem import S1_CELLS_FULL, S1_SPEC
@@ -126,25 +125,16 @@ def compare_methods(cells, newton, sfx):
         "1e-10, 200 steps) under vmap; hybr: scipy.optimize.root(method='hybr',",
         "factor=1) with the jacfwd Jacobian, success flag required.",
     ]
-    text = "\n".join(lines)
-    print(text)
-    with open(
-        os.path.join(results_dir(), f"tanker_equilibria_methods{sfx}.md"), "w"
-    ) as f:
-        f.write(
-            "# S1 equilibrium counts by solver\n\n"
-            + stamp_markdown()
-            + "\n\n"
-            + text
-            + "\n"
-        )
-    with open(
-        os.path.join(results_dir(), f"tanker_equilibria_methods{sfx}.csv"), "w"
-    ) as f:
-        f.write("\n".join(csv) + "\n")
+    write_report(
+        f"tanker_equilibria_methods{sfx}",
+        "S1 equilibrium counts by solver",
+        "\n".join(lines),
+        csv,
+    )
 
 
-def main(quick=False, repeats=3, methods=False):
+def main(quick=False, repeats=None, methods=False):
+    repeats = repeats or 3
     set_quick(quick)
     sfx = "_quick" if quick else ""
     cells = S1_CELLS_FULL
@@ -196,19 +186,10 @@ def main(quick=False, repeats=3, methods=False):
         f"{compile_s:.1f} s, run {np.median(times[1:]):.2f} s (median of "
         f"{max(len(times) - 1, 1)})"
     )
-    text = "\n".join(lines)
-    print(text)
-    with open(os.path.join(results_dir(), f"tanker_equilibria{sfx}.md"), "w") as f:
-        f.write("# S1 equilibrium map\n\n" + stamp_markdown() + "\n\n" + text + "\n")
-    with open(os.path.join(results_dir(), f"tanker_equilibria{sfx}.csv"), "w") as f:
-        f.write("\n".join(csv) + "\n")
+    write_report(f"tanker_equilibria{sfx}", "S1 equilibrium map", "\n".join(lines), csv)
     if methods:
         compare_methods(cells, results, sfx)
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--methods", action="store_true", help="compare solvers")
-    a = p.parse_args()
-    main(quick=a.quick, methods=a.methods)
+    run_study(main, __doc__, methods=dict(action="store_true", help="compare solvers"))

@@ -27,13 +27,11 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, set_quick, stamp_markdown
+from _common import results_dir, run_study, set_quick, stamp_markdown, timed_wall_cpu
 
 import jaxstring as js
 from jaxstring.tandem.analysis import measure_limit_cycle
@@ -88,17 +86,12 @@ def stability_rows(quick):
 
 
 def _timed(scene, solver, tol, ts):
-    t = time.perf_counter()
-    traj = jax.block_until_ready(
-        js.simulate(scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=2_000_000)
+    return timed_wall_cpu(
+        lambda: js.simulate(
+            scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=2_000_000
+        ),
+        1,
     )
-    first = time.perf_counter() - t
-    t, c = time.perf_counter(), time.process_time()
-    traj = jax.block_until_ready(
-        js.simulate(scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=2_000_000)
-    )
-    run, cpu = time.perf_counter() - t, time.process_time() - c
-    return traj, first - run, run, cpu
 
 
 def fishtail_rows(quick):
@@ -250,7 +243,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
     plt.close(fig)
 
 
-def controlled(quick):
+def controlled_study(quick):
     from jaxstring.tandem.analysis import CONTROLLED_METRICS, controlled_metrics
     from jaxstring.tandem.scenes import ENVIRONMENTS, tandem_controlled
 
@@ -329,7 +322,9 @@ def controlled(quick):
     print(text)
 
 
-def main(quick=False):
+def main(quick=False, controlled=False):
+    if controlled:
+        return controlled_study(quick)
     set_quick(quick)
     rows_s, lam0 = stability_rows(quick)
     rows_f, trajs, t1 = fishtail_rows(quick)
@@ -337,15 +332,10 @@ def main(quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument(
-        "--controlled",
-        action="store_true",
-        help="only part 3: the S4 scenes with the line",
+    run_study(
+        main,
+        __doc__,
+        controlled=dict(
+            action="store_true", help="only part 3: the S4 scenes with the line"
+        ),
     )
-    args = ap.parse_args()
-    if args.controlled:
-        controlled(args.quick)
-    else:
-        main(args.quick)

@@ -3,6 +3,7 @@
 import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -85,3 +86,13 @@ def assert_grad_matches_central_differences(
         fd = (plus - minus) / (2 * h)
         rel = abs(float(grad[name]) - fd) / abs(fd)
         assert rel < rtol, f"d/d{name}: {float(grad[name])} vs {fd}"
+
+
+def count_eqns(jaxpr) -> int:
+    """Number of equations in a jaxpr, counting those of its sub-jaxprs."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += 1
+        for sub in jax.core.jaxprs_in_params(eqn.params):
+            n += count_eqns(sub)
+    return n

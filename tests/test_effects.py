@@ -7,21 +7,12 @@ import pytest
 
 import jaxstring as js
 
-from .helpers import FORMULATIONS
-
-
-def _count_eqns(jaxpr) -> int:
-    n = 0
-    for eqn in jaxpr.eqns:
-        n += 1
-        for sub in jax.core.jaxprs_in_params(eqn.params):
-            n += _count_eqns(sub)
-    return n
+from .helpers import FORMULATIONS, count_eqns
 
 
 def _vf_eqns(scene):
     jaxpr = jax.make_jaxpr(scene.vector_field)(0.0, scene.y0).jaxpr
-    return _count_eqns(jaxpr)
+    return count_eqns(jaxpr)
 
 
 def _swinging_state(scene):

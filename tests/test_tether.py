@@ -41,6 +41,8 @@ from jaxstring.tether.models import (
 )
 from jaxstring.tether.scenes import tether_fixed, tether_winch
 
+from .helpers import count_eqns
+
 
 G = 9.81
 RHO = 1024.0
@@ -391,15 +393,6 @@ def test_zero_relative_velocity_gives_exactly_zero_drag_and_finite_gradient():
     assert np.all(np.isfinite(np.asarray(grad)))
 
 
-def _count_eqns(jaxpr):
-    n = 0
-    for eqn in jaxpr.eqns:
-        n += 1
-        for sub in jax.core.jaxprs_in_params(eqn.params):
-            n += _count_eqns(sub)
-    return n
-
-
 def _primitives(jaxpr, acc=None):
     acc = set() if acc is None else acc
     for eqn in jaxpr.eqns:
@@ -421,13 +414,13 @@ def test_scene_without_drag_has_no_drag_operations():
     )
     without = Scene(model=model, effects=(Weight(),), y0=y0, t1=1.0)
     jx = lambda s: jax.make_jaxpr(s.vector_field)(0.0, s.y0).jaxpr
-    assert _count_eqns(jx(without)) < _count_eqns(jx(with_drag))
+    assert count_eqns(jx(without)) < count_eqns(jx(with_drag))
     # |v_t| (abs) appears only in the drag law.
     assert "abs" in _primitives(jx(with_drag))
     assert "abs" not in _primitives(jx(without))
     # Still water: the current is not traced either.
     still = Scene(model=model, effects=(Weight(), Drag()), y0=y0, t1=1.0)
-    assert _count_eqns(jx(still)) < _count_eqns(jx(with_drag))
+    assert count_eqns(jx(still)) < count_eqns(jx(with_drag))
 
 
 def test_weight_and_buoyancy_cancel_for_neutral_cable():

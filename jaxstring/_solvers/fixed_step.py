@@ -58,6 +58,18 @@ def _rms(x):
     return jnp.sqrt(jnp.mean(x**2))
 
 
+class OneStepODESolver(dfx.AbstractSolver):
+    """A one-step solver of one ODE term that keeps no state between steps."""
+
+    term_structure: ClassVar = dfx.AbstractTerm
+
+    def init(self, terms, t0, t1, y0, args):
+        return None
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+
 class _ThetaResidual(eqx.Module):
     theta: float = eqx.field(static=True)
 
@@ -230,7 +242,7 @@ def _newton(
     return x, size <= kappa
 
 
-class ThetaMethod(dfx.AbstractSolver):
+class ThetaMethod(OneStepODESolver):
     """Theta-method with a fixed step (chord or full Newton per step).
 
     **Arguments:**
@@ -264,7 +276,6 @@ class ThetaMethod(dfx.AbstractSolver):
     linear_solver: str = eqx.field(static=True, default="auto")
     newton: str = eqx.field(static=True, default="full")
     extrapolate: bool | None = eqx.field(static=True, default=None)
-    term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
     def __check_init__(self):
@@ -286,9 +297,6 @@ class ThetaMethod(dfx.AbstractSolver):
             return None
         # (previous increment, previous step size); h = 0: no previous step.
         return jnp.zeros_like(y0), jnp.zeros((), jnp.result_type(t0, t1))
-
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         h = t1 - t0
@@ -323,7 +331,7 @@ class ThetaMethod(dfx.AbstractSolver):
         return y1, None, dict(y0=y0, y1=y1), state, result
 
 
-class Newmark(dfx.AbstractSolver):
+class Newmark(OneStepODESolver):
     """Newmark-beta with a fixed step, Newton (chord or full) on the acceleration.
 
     **Arguments:**
@@ -344,7 +352,6 @@ class Newmark(dfx.AbstractSolver):
     max_iters: int = eqx.field(static=True, default=100)
     linear_solver: str = eqx.field(static=True, default="auto")
     newton: str = eqx.field(static=True, default="full")
-    term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
     def __check_init__(self):
@@ -365,9 +372,6 @@ class Newmark(dfx.AbstractSolver):
                 f"rates in two equal halves; got shape {jnp.shape(y0)}."
             )
         return None
-
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump

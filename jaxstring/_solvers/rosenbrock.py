@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _linalg
+from .fixed_step import OneStepODESolver
 
 
 _GAMMA = 0.21193756319429014
@@ -184,7 +185,7 @@ def _combine(coeffs, ks):
     return out
 
 
-class Rodas5P(dfx.AbstractAdaptiveSolver):
+class Rodas5P(OneStepODESolver, dfx.AbstractAdaptiveSolver):
     """Rodas5P (Steinebach 2023): Rosenbrock-Wanner, order 5(4), stiffly accurate,
     one Jacobian and one factorisation per step.
 
@@ -197,17 +198,10 @@ class Rodas5P(dfx.AbstractAdaptiveSolver):
     """
 
     linear_solver: str = eqx.field(static=True, default="auto")
-    term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = RodasInterpolation
 
     def order(self, terms):
         return 5
-
-    def init(self, terms, t0, t1, y0, args):
-        return None
-
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump

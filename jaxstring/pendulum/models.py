@@ -63,6 +63,20 @@ class AbstractString(AbstractModel):
     def __check_init__(self):
         _check_string(self)
 
+    def elastic_energy(self, y, effects):
+        """Elastic energy stored in the string, J."""
+        _, laws = split_effects(effects)
+        eps, _ = self.strain(y)
+        e = elastic_strain(laws, eps)
+        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
+
+    def constraint_error(self, y):
+        """Largest violation of the model's kinematic constraint (0 if it has none)."""
+        return jnp.zeros((), y.dtype)
+
+    def project(self, y):
+        return y
+
     def state_shape(self):
         return jnp.shape(self.initial_state(0.0))
 
@@ -110,14 +124,6 @@ class AbstractString(AbstractModel):
     @abc.abstractmethod
     def vector_field(self, t, y, effects, env) -> Array:
         """dy/dt of the state `y` at time `t` (s) under `effects` in `env`."""
-
-    @abc.abstractmethod
-    def elastic_energy(self, y, effects) -> Array:
-        """Elastic energy stored in the string, J."""
-
-    @abc.abstractmethod
-    def constraint_error(self, y) -> Array:
-        """Largest violation of the model's kinematic constraint (0 if it has none)."""
 
     @abc.abstractmethod
     def kinetic_energy(self, y) -> Array:
@@ -308,18 +314,6 @@ class DisplacementString(AbstractString):
         acc = jnp.concatenate([acc_int, acc_end[None, :]], axis=0)
         return jnp.concatenate([y[:, self.dim :], acc], axis=1)
 
-    def elastic_energy(self, y, effects):
-        _, laws = split_effects(effects)
-        eps, _ = self.strain(y)
-        e = elastic_strain(laws, eps)
-        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
-
-    def constraint_error(self, y):
-        return jnp.zeros((), y.dtype)
-
-    def project(self, y):
-        return y
-
     def kinetic_energy(self, y):
         v = self.kinematics(y).velocities
         return 0.5 * jnp.sum(self.node_masses() * jnp.sum(v**2, -1))
@@ -464,12 +458,6 @@ class NaturalTangentString(AbstractString):
             [eps_dot[:, None], tan_dot, eps_dd[:, None], tan_dd], axis=1
         )
 
-    def elastic_energy(self, y, effects):
-        _, laws = split_effects(effects)
-        eps, _ = self.strain(y)
-        e = elastic_strain(laws, eps)
-        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
-
     def constraint_error(self, y):
         _, t, _, _ = self._split(y)
         return jnp.max(jnp.abs(safe_norm(t) - 1.0))
@@ -550,18 +538,6 @@ class NaturalAngleString(AbstractString):
         eps_dd = jnp.sum(x * tan, -1) + (1 + eps) * phi_dot**2
         phi_dd = (jnp.sum(x * nrm, -1) - 2 * eps_dot * phi_dot) / (1 + eps)
         return jnp.stack([eps_dot, phi_dot, eps_dd, phi_dd], axis=1)
-
-    def elastic_energy(self, y, effects):
-        _, laws = split_effects(effects)
-        eps, _ = self.strain(y)
-        e = elastic_strain(laws, eps)
-        return 0.5 * self.EA * jnp.sum(self.tension_weights() * e**2)
-
-    def constraint_error(self, y):
-        return jnp.zeros((), y.dtype)
-
-    def project(self, y):
-        return y
 
     def kinetic_energy(self, y):
         eps, phi, eps_dot, phi_dot = y[:, 0], y[:, 1], y[:, 2], y[:, 3]

@@ -384,6 +384,15 @@ class AbstractTether(AbstractModel):
     def __check_init__(self):
         _check_tether(self)
 
+    def _end_link_energy(self, ch):
+        """Elastic energy of the proportional end links (stiffness `k`, N)."""
+        onehot = self._root_onehot(ch)
+        stretch = ch.l - ch.g
+        e = 0.5 * self.k / self.link_length * jnp.sum(onehot * stretch**2)
+        if self.fast.attached:
+            e = e + 0.5 * self.k / self.link_length * stretch[-1] ** 2
+        return e
+
     # -- derived sizes (properties of the parameters, so they stay differentiable)
     @property
     def n_links(self) -> int:
@@ -745,12 +754,7 @@ class AceamTether(AbstractTether):
         return T.at[N].add(T_fast)
 
     def _elastic_energy(self, ch):
-        onehot = self._root_onehot(ch)
-        stretch = ch.l - ch.g
-        e = 0.5 * self.k / self.link_length * jnp.sum(onehot * stretch**2)
-        if self.fast.attached:
-            e = e + 0.5 * self.k / self.link_length * stretch[-1] ** 2
-        return e
+        return self._end_link_energy(ch)
 
 
 class ExactTether(AbstractTether):
@@ -840,12 +844,7 @@ class ExactTether(AbstractTether):
     def _elastic_energy(self, ch):
         if self.end_links == "rigid":
             return jnp.zeros(())
-        onehot = self._root_onehot(ch)
-        stretch = ch.l - ch.g
-        e = 0.5 * self.k / self.link_length * jnp.sum(onehot * stretch**2)
-        if self.fast.attached:
-            e = e + 0.5 * self.k / self.link_length * stretch[-1] ** 2
-        return e
+        return self._end_link_energy(ch)
 
 
 class LmsTether(AbstractTether):
