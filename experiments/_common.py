@@ -264,6 +264,19 @@ def solver_names(kind: str = "all", wanted=None) -> list:
     return out
 
 
+def timing_fields(traj, compile_s, run_s, cpu_s=None) -> dict:
+    """A result row's outcome and cost: ok, status, accepted steps, compile/run/CPU
+    seconds."""
+    return dict(
+        ok=traj.ok,
+        status=traj.status,
+        steps=int(traj.stats["num_steps"]),
+        compile_s=compile_s,
+        run_s=run_s,
+        cpu_s=cpu_s,
+    )
+
+
 def stats_dict(traj) -> dict:
     """Integer solver statistics of a Trajectory."""
     return {k: int(v) for k, v in traj.stats.items() if k != "max_steps"}

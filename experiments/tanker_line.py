@@ -31,7 +31,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, run_study, set_quick, stamp_markdown, timed_wall_cpu
+from _common import (
+    results_dir,
+    run_study,
+    set_quick,
+    stamp_markdown,
+    timed_wall_cpu,
+    timing_fields,
+)
 
 import jaxstring as js
 from jaxstring.tandem.analysis import measure_limit_cycle
@@ -119,11 +126,7 @@ def fishtail_rows(quick):
                 N=N,
                 solver=solver,
                 tol=tol,
-                status=traj.status,
-                steps=int(traj.stats["num_steps"]),
-                compile_s=compile_s,
-                run_s=run,
-                cpu_s=cpu,
+                **timing_fields(traj, compile_s, run, cpu),
                 **{k: float(v) for k, v in m.items()},
             )
         )
@@ -267,11 +270,7 @@ def controlled_study(quick):
                     env=env,
                     hawser=hawser,
                     solver=solver,
-                    status=traj.status,
-                    steps=int(traj.stats["num_steps"]),
-                    compile_s=compile_s,
-                    run_s=run,
-                    cpu_s=cpu,
+                    **timing_fields(traj, compile_s, run, cpu),
                     **{k: m[k] for k in keys},
                 )
             )

@@ -54,11 +54,7 @@ def summary(label, traj, compile_s, run_s, cpu_s):
     Ff = np.linalg.norm(np.asarray(traj.fast_force), axis=1)
     return {
         "run": label,
-        "ok": traj.ok,
-        "steps": int(traj.stats["num_steps"]),
-        "compile_s": compile_s,
-        "run_s": run_s,
-        "cpu_s": cpu_s,
+        **common.timing_fields(traj, compile_s, run_s, cpu_s),
         "max_length_error": float(err.max()),
         "max_link_strain": float(strain[:, 1:-1].max()),
         "max_root_force_N": float(Fr.max()),

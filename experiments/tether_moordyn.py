@@ -413,11 +413,7 @@ def run_jaxstring(method, ts, repeats):
     )
     return {
         "scene": scene,
-        "ok": traj.ok,
-        "steps": int(traj.stats["num_steps"]),
-        "compile_s": compile_s,
-        "run_s": run,
-        "cpu_s": cpu,
+        **common.timing_fields(traj, compile_s, run, cpu),
         "repeats": repeats,
         "root_force": np.asarray(traj.root_force),
         "fast_force": np.asarray(traj.fast_force),

@@ -279,7 +279,9 @@ def resolve_params(scene, params, positive):
     return getters, positive
 
 
-def _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project):
+def _solve_options(
+    solver, rtol, atol, n_save=201, dt0=None, max_steps=200_000, project=True
+):
     return dict(
         solver=solver,
         rtol=rtol,
@@ -571,12 +573,7 @@ def gauss_newton(
     if sigma is not None:
         check_positive("sigma", sigma)
     config = SolveConfig(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        n_save=n_save,
-        max_steps=max_steps,
-        project=project,
+        **_solve_options(solver, rtol, atol, n_save, None, max_steps, project),
         adjoint=dfx.ForwardMode(),
     )
     if ts is not None:

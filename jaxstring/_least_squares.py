@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._fit import resolve, resolve_params
+from ._fit import _solve_options, resolve, resolve_params
 from ._scene import Scene
 from ._simulate import SolveConfig, solve
 from ._validate import check_int, check_positive, check_times, show
@@ -251,10 +251,7 @@ def least_squares(
     if sigma is not None:
         check_positive("sigma", sigma)
     config = SolveConfig(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
+        **_solve_options(solver, rtol, atol, max_steps=max_steps),
         adjoint=dfx.ForwardMode(),
     )
     if ts is None:

@@ -397,7 +397,19 @@ def _natural_x(model, t, kin, tangent, N, loads, env):
     return _apply_minv_neg(z, model.k, model.l, a)
 
 
-class NaturalTangentString(AbstractString):
+class _AbstractNaturalString(AbstractString):
+    """Natural variables: strain and direction at the nodes, integrated along the
+    string by the trapezoidal rule (node masses and tension weights alike)."""
+
+    def node_masses(self):
+        m = self.mu * _trapezoid_weights(self.l, self.k)
+        return m.at[-1].add(self.m_s)
+
+    def tension_weights(self):
+        return _trapezoid_weights(self.l, self.k)
+
+
+class NaturalTangentString(_AbstractNaturalString):
     """String in natural variables: strain eps and Cartesian tangent t (eqs 15-23).
 
     State `y`: shape `(k + 1, 2 + 2 dim)`, row i = (eps_i, t_i, eps_i', t_i') at node
@@ -432,13 +444,6 @@ class NaturalTangentString(AbstractString):
     def strain(self, y):
         eps, _, eps_dot, _ = self._split(y)
         return eps, eps_dot
-
-    def node_masses(self):
-        m = self.mu * _trapezoid_weights(self.l, self.k)
-        return m.at[-1].add(self.m_s)
-
-    def tension_weights(self):
-        return _trapezoid_weights(self.l, self.k)
 
     def vector_field(self, t, y, effects, env):
         loads, laws = split_effects(effects)
@@ -479,7 +484,7 @@ class NaturalTangentString(AbstractString):
         return _natural_load_potential(self, (1 + eps)[:, None] * t, loads)
 
 
-class NaturalAngleString(AbstractString):
+class NaturalAngleString(_AbstractNaturalString):
     """String in natural variables: strain eps and tangent angle phi (2D).
 
     State `y`: shape `(k + 1, 4)`, row i = (eps_i, phi_i, eps_i', phi_i'), with
@@ -520,13 +525,6 @@ class NaturalAngleString(AbstractString):
 
     def strain(self, y):
         return y[:, 0], y[:, 2]
-
-    def node_masses(self):
-        m = self.mu * _trapezoid_weights(self.l, self.k)
-        return m.at[-1].add(self.m_s)
-
-    def tension_weights(self):
-        return _trapezoid_weights(self.l, self.k)
 
     def vector_field(self, t, y, effects, env):
         loads, laws = split_effects(effects)

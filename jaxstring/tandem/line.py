@@ -347,25 +347,28 @@ def line_equilibrium(scene, y_guess=None, max_steps=200):
 
 
 HAWSER_KINDS = ("massless", "line")
+LINE_OPTIONS = (
+    "N",
+    "d",
+    "mass_per_length",
+    "added_mass",
+    "damping",
+    "c_n",
+    "c_t",
+    "gravity",
+)
 
 
-def with_line(
-    scene,
-    N=8,
-    d=0.16,
-    mass_per_length=25.0,
-    c_n=1.0,
-    c_t=0.1,
-    damping=0.0,
-    gravity=True,
-    name=None,
-):
+def with_line(scene, c_n=1.0, c_t=0.1, gravity=True, name=None, **line_options):
     """The tandem `scene` with its massless `Hawser` replaced by a line of the same
     length and small-stretch stiffness (EA = k_h l0) with mass, weight, buoyancy
     and drag in the scene's current (`hawser_line`, `line_effects`; `gravity=False`
     leaves out weight and buoyancy, `c_n = c_t = 0` the drag). The vessels start
     where the scene's do; the line starts in its static shape between the
-    fairleads. A controller keeps the massless hawser as its model of the line."""
+    fairleads. A controller keeps the massless hawser as its model of the line.
+
+    `line_options`: the line's `N`, `d`, `mass_per_length`, `added_mass` and
+    `damping`, as for `hawser_line` (its length and stiffness are the hawser's)."""
     from .._scene import Scene
 
     if not isinstance(scene.model, Tandem):
@@ -374,14 +377,12 @@ def with_line(
     if not hawsers:
         raise ValueError("`with_line`: the scene has no `Hawser` to replace.")
     hawser = hawsers[0]
-    line = hawser_line(
-        l0=hawser.l0,
-        k_h=hawser.k_h,
-        N=N,
-        d=d,
-        mass_per_length=mass_per_length,
-        damping=damping,
-    )
+    unknown = sorted(set(line_options) - set(LINE_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"`with_line`: unknown option(s) {unknown}; valid: {LINE_OPTIONS}."
+        )
+    line = hawser_line(l0=hawser.l0, k_h=hawser.k_h, **line_options)
     model = TandemLine(scene.model, line, controller_hawser=hawser)
     vessel = tuple(e for e in scene.effects if not isinstance(e, Hawser))
     eff = line_effects(c_n=c_n, c_t=c_t)

@@ -5,7 +5,6 @@ wind blowing toward `pi + Delta_w`, so `Delta_w` is the angle between where the
 wind and where the current come from.
 """
 
-import inspect
 import math
 
 import equinox as eqx
@@ -15,7 +14,7 @@ from .._environment import Environment, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
-from .line import HAWSER_KINDS, with_line
+from .line import HAWSER_KINDS, LINE_OPTIONS, with_line
 from .vessels import (
     AbstractVesselLoad,
     ConstantThrust,
@@ -191,11 +190,7 @@ def _check_hawser(hawser, line_options):
             f"{line_options!r}."
         )
     if line_options:
-        valid = [
-            k
-            for k in inspect.signature(with_line).parameters
-            if k not in ("scene", "name")
-        ]
+        valid = LINE_OPTIONS
         unknown = sorted(set(line_options) - set(valid))
         if unknown:
             raise ValueError(
