@@ -249,9 +249,13 @@ def test_tension_matches_reference(alpha):
     )
 
 
+def _reference_energy(alpha):
+    model, ys = _reference(alpha)
+    return np.array([model.energy(y) for y in ys])
+
+
 def test_reference_energy_conserved_without_damping():
-    model, ys = _reference(0.0)
-    E = np.array([model.energy(y) for y in ys])
+    E = _reference_energy(0.0)
     drift = np.max(np.abs(E - E[0]))
     assert drift <= ENERGY_CONSERVATION_RTOL * ENERGY_SCALE, (
         f"reference energy drift {drift:.3e} J with alpha=0 "
@@ -261,8 +265,7 @@ def test_reference_energy_conserved_without_damping():
 
 
 def test_reference_energy_decays_with_damping():
-    model, ys = _reference(0.01)
-    E = np.array([model.energy(y) for y in ys])
+    E = _reference_energy(0.01)
     rise = np.max(np.diff(E))
     assert rise <= ENERGY_CONSERVATION_RTOL * ENERGY_SCALE, (
         f"reference energy rises by {rise:.3e} J between save times with alpha=0.01"
@@ -272,9 +275,8 @@ def test_reference_energy_decays_with_damping():
 
 @ALPHAS
 def test_energy_matches_reference(alpha):
-    model, ys = _reference(alpha)
     traj = _jaxstring(alpha)
-    E_ref = np.array([model.energy(y) for y in ys])
+    E_ref = _reference_energy(alpha)
     err_t = np.abs(np.asarray(traj.energy) - E_ref)
     worst = int(np.argmax(err_t))
     assert err_t[worst] <= ENERGY_MATCH_RTOL * ENERGY_SCALE, (

@@ -72,38 +72,18 @@ def _pendulum_arguments(p: argparse.ArgumentParser) -> None:
 def _pendulum_build(a: argparse.Namespace):
     from .. import scenes
 
+    p = _pendulum_parameters(a)
     effects = tuple(scenes.DEFAULT_PENDULUM_EFFECTS)
-    if a.slack:
+    if p.pop("slack"):
         effects = effects + ("slack",)
-    return scenes.string_pendulum(
-        formulation=a.formulation,
-        k=a.k,
-        EA=a.EA,
-        alpha=a.alpha,
-        l=a.l,
-        mu=a.mu,
-        m_s=a.m_s,
-        g=a.g,
-        theta0=a.theta0,
-        t1=a.t1,
-        effects=effects,
-    )
+    return scenes.string_pendulum(**p, effects=effects)
+
+
+_PENDULUM_KEYS = "formulation k EA alpha l mu m_s g theta0 t1 slack".split()
 
 
 def _pendulum_parameters(a: argparse.Namespace) -> dict:
-    return {
-        "formulation": a.formulation,
-        "k": a.k,
-        "EA": a.EA,
-        "alpha": a.alpha,
-        "l": a.l,
-        "mu": a.mu,
-        "m_s": a.m_s,
-        "g": a.g,
-        "theta0": a.theta0,
-        "t1": a.t1,
-        "slack": a.slack,
-    }
+    return {key: getattr(a, key) for key in _PENDULUM_KEYS}
 
 
 def _pendulum_long_run(a: argparse.Namespace) -> bool:
