@@ -280,8 +280,21 @@ def resolve_params(scene, params, positive):
 
 
 def _solve_options(
-    solver, rtol, atol, n_save=201, dt0=None, max_steps=200_000, project=True
+    solver="kvaerno5",
+    rtol=1e-8,
+    atol=1e-8,
+    n_save=201,
+    dt0=None,
+    max_steps=200_000,
+    project=True,
+    **unknown,
 ):
+    """The solve options of `fit` and its relatives, with their defaults."""
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {sorted(unknown)}; valid: solver, rtol, atol, "
+            "n_save, dt0, max_steps, project (and the function's own arguments)."
+        )
     return dict(
         solver=solver,
         rtol=rtol,
@@ -349,26 +362,21 @@ def value_and_grad(
     *,
     positive: bool | Sequence[bool] = False,
     simulate: bool = True,
-    solver="kvaerno5",
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
     ts=None,
-    n_save: int = 201,
-    dt0=None,
-    max_steps: int = 200_000,
-    project: bool = True,
     adjoint="recursive",
     checkpoints: int | str | None = None,
+    **solve_options,
 ) -> tuple[float, dict]:
     """Loss and its gradient with respect to chosen parameters, as `fit` computes them.
 
-    Arguments as for `fit`. With `positive=False` (default) the gradient is
-    d loss / d p in the parameters' own units; with `positive=True` it is
-    d loss / d log p (what `fit` descends).
+    Arguments as for `fit`, and `solve_options` are fit's `solver`, `rtol`, `atol`,
+    `n_save`, `dt0`, `max_steps`, `project` (same defaults). With `positive=False`
+    (default) the gradient is d loss / d p in the parameters' own units; with
+    `positive=True` it is d loss / d log p (what `fit` descends).
 
     **Returns:** `(loss, {label: gradient})`.
     """
-    solve_kw = _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project)
+    solve_kw = _solve_options(**solve_options)
     getters, theta, pos, frozen, config, ts = _setup(
         scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
     )

@@ -18,6 +18,7 @@ moment/(`FSCALE` `LSCALE`)), which vanish exactly where the accelerations do.
 """
 
 import dataclasses
+import inspect
 import math
 
 import equinox as eqx
@@ -290,29 +291,33 @@ def find_equilibria(
     on the method; no method reproduces every cell of the spec's table (see
     experiments/results/tanker_equilibria_methods.md).
     """
-    _check_method(method)
+    _check_tandem(scene)
+    return _find_map([scene], n_grid, taut_tension, rtol, atol, max_steps, method)[0]
+
+
+def _check_tandem(scene):
     if not isinstance(scene.model, Tandem):
         raise ValueError("`find_equilibria` needs a Tandem scene.")
     _hawser(scene)
-    out = _equilibria_batch(
-        scene, grid_starts(scene, n_grid), rtol, atol, max_steps, method
-    )
-    return _collect(*out, taut_tension)
 
 
-def find_equilibria_map(
-    scenes,
-    n_grid=14,
-    taut_tension=1.0,
-    rtol=1e-10,
-    atol=1e-10,
-    max_steps=200,
-    method="newton",
-):
+def find_equilibria_map(scenes, **options):
     """`find_equilibria` for several scenes of one structure (e.g. a wind map),
-    all solved in one vmapped, compiled call. Returns a list of lists."""
-    _check_method(method)
+    all solved in one vmapped, compiled call; `options` as for `find_equilibria`.
+    Returns a list of lists."""
     scenes = list(scenes)
+    for sc in scenes:
+        _check_tandem(sc)
+    try:
+        args = inspect.signature(find_equilibria).bind(None, **options)
+    except TypeError as e:
+        raise ValueError(f"`find_equilibria_map`: {e}") from None
+    args.apply_defaults()
+    return _find_map(scenes, *list(args.arguments.values())[1:])
+
+
+def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
+    _check_method(method)
     batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
     q0s = jnp.stack([grid_starts(sc, n_grid) for sc in scenes])
     solve = eqx.filter_vmap(
