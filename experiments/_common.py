@@ -485,3 +485,27 @@ def timed_wall_cpu(fn, repeats):
         cpus.append(c)
     wall = statistics.median(walls)
     return out, max(first - wall, 0.0), wall, statistics.median(cpus)
+
+
+def fit_row(seed, res, wall, truth, sigma_name="sigma"):
+    """One row of an identification study, printed: for each short name in
+    `truth` (short name -> (parameter name, true value)) the `least_squares`
+    estimate, its error in percent and its reported std; then the noise estimate
+    (as `sigma_name`), iterations, solves and the fit's wall time."""
+    row = dict(seed=seed, converged=res.converged)
+    for short, (name, true) in truth.items():
+        row[short] = res.values[name]
+        row[f"{short}_err_pct"] = 100 * (res.values[name] / true - 1)
+        row[f"{short}_std"] = res.std[name]
+    row.update(
+        {sigma_name: res.sigma},
+        iterations=res.iterations,
+        solves=res.solves,
+        wall_s=wall,
+    )
+    est = ", ".join(f"{s} {row[s]:.6g} ({row[s + '_err_pct']:+.2f} %)" for s in truth)
+    print(
+        f"seed {seed:2d}: {est}, {res.iterations} iterations, {wall:.1f} s, "
+        f"{res.message}"
+    )
+    return row

@@ -20,11 +20,8 @@ import importlib.util
 import os
 
 import _common as common
-import jax.numpy as jnp
 import numpy as np
-from bench_solvers import run_cvode, run_solver
-
-import jaxstring as js
+from bench_solvers import solver_block
 
 
 def run_scipy_bdf(scene, ts, rtol, atol, repeats):
@@ -82,16 +79,13 @@ def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):
     print(f"CVODE (scikit-sundae): {'yes' if have_cvode else 'not installed'}")
     rows = []
     for EA in EAs:
-        scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
-        ts = jnp.linspace(0.0, t1, 201)
-        ref_end = common.tight_reference(scene, ts)
-        block = []
-        if have_cvode:
-            block.append(run_cvode(scene, ts, rtol, atol, repeats))
-        for name in ("bdf", "rodas5p"):
-            block.append(run_solver(scene, name, ts, rtol, atol, repeats))
+        extra = None
         if scipy_bdf:
-            block.append(run_scipy_bdf(scene, ts, rtol, atol, 1 if EA > 1e7 else 2))
+            reps = 1 if EA > 1e7 else 2
+            extra = lambda scene, ts: run_scipy_bdf(scene, ts, rtol, atol, reps)
+        block, ref_end = solver_block(
+            EA, k, t1, ("bdf", "rodas5p"), rtol, atol, repeats, extra
+        )
         bdf = next(r for r in block if r["solver"] == "bdf")
         for r in block:
             r["vs_bdf"] = (

@@ -110,6 +110,22 @@ def run_cvode(scene, ts, rtol, atol, repeats):
     return row
 
 
+def solver_block(EA, k, t1, names, rtol, atol, repeats, extra=None):
+    """The default pendulum (displacement variables) at `EA`: CVODE (when
+    installed) and each solver of `names` at one tolerance, plus `extra(scene, ts)`
+    rows; returns (rows, the tight reference's end-mass path)."""
+    scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
+    ts = jnp.linspace(0.0, t1, 201)
+    ref_end = common.tight_reference(scene, ts)
+    rows = []
+    if importlib.util.find_spec("sksundae") is not None:
+        rows.append(run_cvode(scene, ts, rtol, atol, repeats))
+    rows += [run_solver(scene, name, ts, rtol, atol, repeats) for name in names]
+    if extra is not None:
+        rows.append(extra(scene, ts))
+    return rows, ref_end
+
+
 def component_costs(k, EA=1e6, reps=200):
     """In-loop cost (us) of the pieces of an implicit step at k elements."""
     scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, theta0=1.0)
@@ -180,14 +196,7 @@ def main(
 
     rows = []
     for EA in EAs if table1 else ():
-        scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
-        ts = jnp.linspace(0.0, t1, 201)
-        ref_end = common.tight_reference(scene, ts)
-        block_rows = []
-        if have_cvode:
-            block_rows.append(run_cvode(scene, ts, rtol, atol, repeats))
-        for name in names:
-            block_rows.append(run_solver(scene, name, ts, rtol, atol, repeats))
+        block_rows, ref_end = solver_block(EA, k, t1, names, rtol, atol, repeats)
         common.score_rows(
             block_rows, ref_end, block_rows[0] if have_cvode else None, EA=EA
         )

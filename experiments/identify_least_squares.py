@@ -135,27 +135,8 @@ def main(quick=False):
     for seed in range(n_seeds):
         rng = np.random.default_rng(seed)
         res, wall = fit(clean + NOISE * rng.standard_normal(clean.shape), ts)
-        row = dict(
-            seed=seed,
-            converged=res.converged,
-            alpha=res.values["alpha"],
-            EA=res.values["EA"],
-            alpha_err_pct=100 * (res.values["alpha"] / ALPHA - 1),
-            EA_err_pct=100 * (res.values["EA"] / EA - 1),
-            alpha_std=res.std["alpha"],
-            EA_std=res.std["EA"],
-            sigma_m=res.sigma,
-            iterations=res.iterations,
-            solves=res.solves,
-            wall_s=wall,
-        )
-        rows.append(row)
-        print(
-            f"seed {seed:2d}: alpha {row['alpha']:.5f} "
-            f"({row['alpha_err_pct']:+.2f} %), EA {row['EA']:.1f} "
-            f"({row['EA_err_pct']:+.2f} %), {row['iterations']} iterations, "
-            f"{wall:.1f} s, {res.message}"
-        )
+        truth = {"alpha": ("alpha", ALPHA), "EA": ("EA", EA)}
+        rows.append(common.fit_row(seed, res, wall, truth, "sigma_m"))
     a = np.array([r["alpha"] for r in rows])
     e = np.array([r["EA"] for r in rows])
     scatter_a, scatter_e = a.std(ddof=1), e.std(ddof=1)

@@ -91,23 +91,8 @@ def main(quick=False):
             max_steps=100_000,
         )
         wall = time.perf_counter() - t0
-        row = dict(seed=seed, converged=res.converged)
-        for name, short, truth_v in zip(PARAMS, ("C_Y1", "C_Y2"), true_vals):
-            row[short] = res.values[name]
-            row[f"{short}_err_pct"] = 100 * (res.values[name] / truth_v - 1)
-            row[f"{short}_std"] = res.std[name]
-        row.update(
-            sigma_deg=res.sigma,
-            iterations=res.iterations,
-            solves=res.solves,
-            wall_s=wall,
-        )
-        rows.append(row)
-        print(
-            f"seed {seed:2d}: C_Y1 {row['C_Y1']:.4f} ({row['C_Y1_err_pct']:+.2f} %), "
-            f"C_Y2 {row['C_Y2']:.4f} ({row['C_Y2_err_pct']:+.2f} %), "
-            f"{res.iterations} iterations, {wall:.1f} s, {res.message}"
-        )
+        truth = dict(zip(("C_Y1", "C_Y2"), zip(PARAMS, true_vals)))
+        rows.append(common.fit_row(seed, res, wall, truth, "sigma_deg"))
     c1 = np.array([r["C_Y1"] for r in rows])
     c2 = np.array([r["C_Y2"] for r in rows])
     later = float(np.median([r["wall_s"] for r in rows[1:]]))

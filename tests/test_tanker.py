@@ -17,6 +17,25 @@ import numpy as np
 import pytest
 
 import jaxstring as js
+from jaxstring.tandem import (
+    ENVIRONMENTS,
+    ConstantThrust,
+    Hawser,
+    MooredFPSO,
+    NonlinearCompensator,
+    OCIMFWind,
+    ShortWingCurrent,
+    Tandem,
+    TurretMooring,
+    fpso_hull,
+    make_hull,
+    shuttle_hull,
+    tandem_controlled,
+    tandem_equilibria,
+    tandem_fishtail,
+    tandem_fpso_alone,
+    tandem_hopf,
+)
 from jaxstring.tandem.analysis import (
     classify,
     controlled_metrics,
@@ -27,33 +46,9 @@ from jaxstring.tandem.analysis import (
     pitchfork_sweep,
     stability,
 )
-from jaxstring.tandem.autopilot import NonlinearCompensator, outputs
-from jaxstring.tandem.scenes import (
-    ENVIRONMENTS,
-    current_field,
-    environment,
-    tandem_controlled,
-    tandem_equilibria,
-    tandem_fishtail,
-    tandem_fpso_alone,
-    tandem_hopf,
-    tandem_model,
-)
-from jaxstring.tandem.vessels import (
-    ConstantThrust,
-    Hawser,
-    MooredFPSO,
-    OCIMFWind,
-    ShortWingCurrent,
-    Tandem,
-    TurretMooring,
-    VesselKinematics,
-    current_at,
-    fpso_hull,
-    make_hull,
-    ocimf_coefficients,
-    shuttle_hull,
-)
+from jaxstring.tandem.autopilot import outputs
+from jaxstring.tandem.scenes import current_field, environment, tandem_model
+from jaxstring.tandem.vessels import VesselKinematics, current_at, ocimf_coefficients
 
 
 TOL = 1e-8  # tsit5 tolerances of the simulations

@@ -242,7 +242,43 @@ def _newton(
     return x, size <= kappa
 
 
-class ThetaMethod(OneStepODESolver):
+class _NewtonFixedStep(OneStepODESolver):
+    """The Newton options shared by the fixed-step implicit solvers (keyword-only:
+    `rtol`, `atol` the convergence test of the step's Newton iteration, `kappa` its
+    contraction target, `max_iters`, `linear_solver`, `newton` = "full" or "chord")."""
+
+    rtol: Any = eqx.field(default=1e-7, kw_only=True)
+    atol: Any = eqx.field(default=1e-7, kw_only=True)
+    kappa: float = eqx.field(static=True, default=0.1, kw_only=True)
+    max_iters: int = eqx.field(static=True, default=100, kw_only=True)
+    linear_solver: str = eqx.field(static=True, default="auto", kw_only=True)
+    newton: str = eqx.field(static=True, default="full", kw_only=True)
+    interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
+
+    def _solve(self, residual, x0, a, y_of_x, x_restart=None, early_stop=True):
+        """The step's implicit equation residual(x, a) = 0 by `_newton` with this
+        solver's options; returns (x, diffrax result)."""
+        x, ok = _newton(
+            residual,
+            x0,
+            a,
+            y_of_x,
+            self.rtol,
+            self.atol,
+            self.kappa,
+            self.max_iters,
+            self.linear_solver,
+            _CHORD_ITERS if self.newton == "chord" else 0,
+            x_restart,
+            early_stop,
+        )
+        result = dfx.RESULTS.where(
+            ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
+        )
+        return x, result
+
+
+class ThetaMethod(_NewtonFixedStep):
     """Theta-method with a fixed step (chord or full Newton per step).
 
     **Arguments:**
@@ -269,14 +305,7 @@ class ThetaMethod(OneStepODESolver):
     """
 
     theta: float = eqx.field(static=True, default=0.5)
-    rtol: Any = 1e-7
-    atol: Any = 1e-7
-    kappa: float = eqx.field(static=True, default=0.1)
-    max_iters: int = eqx.field(static=True, default=100)
-    linear_solver: str = eqx.field(static=True, default="auto")
-    newton: str = eqx.field(static=True, default="full")
     extrapolate: bool | None = eqx.field(static=True, default=None)
-    interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
     def __check_init__(self):
         if not 0.0 <= float(self.theta) <= 1.0:
@@ -310,28 +339,14 @@ class ThetaMethod(OneStepODESolver):
             dy0 = ratio.astype(y0.dtype) * dy_prev
         else:
             dy0 = jnp.zeros_like(y0)
-        dy, ok = _newton(
-            res,
-            dy0,
-            a,
-            lambda d: y0 + d,
-            self.rtol,
-            self.atol,
-            self.kappa,
-            self.max_iters,
-            self.linear_solver,
-            _CHORD_ITERS if self.newton == "chord" else 0,
-            jnp.zeros_like(y0) if self._extrapolate else None,
-        )
+        restart = jnp.zeros_like(y0) if self._extrapolate else None
+        dy, result = self._solve(res, dy0, a, lambda d: y0 + d, restart)
         y1 = y0 + dy
-        result = dfx.RESULTS.where(
-            ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
-        )
         state = (dy, h) if self._extrapolate else None
         return y1, None, dict(y0=y0, y1=y1), state, result
 
 
-class Newmark(OneStepODESolver):
+class Newmark(_NewtonFixedStep):
     """Newmark-beta with a fixed step, Newton (chord or full) on the acceleration.
 
     **Arguments:**
@@ -346,13 +361,6 @@ class Newmark(OneStepODESolver):
 
     gamma: float = eqx.field(static=True, default=0.5)
     beta: float = eqx.field(static=True, default=0.25)
-    rtol: Any = 1e-7
-    atol: Any = 1e-7
-    kappa: float = eqx.field(static=True, default=0.1)
-    max_iters: int = eqx.field(static=True, default=100)
-    linear_solver: str = eqx.field(static=True, default="auto")
-    newton: str = eqx.field(static=True, default="full")
-    interpolation_cls: ClassVar = dfx.LocalLinearInterpolation
 
     def __check_init__(self):
         if not (0.0 <= float(self.beta) <= 0.5 and 0.0 <= float(self.gamma) <= 1.0):
@@ -381,21 +389,8 @@ class Newmark(OneStepODESolver):
         a0 = terms.vf(t0, y0, args)[..., m:]
         a = (t1, q0, v0, a0, h, terms, args)
         res = _NewmarkResidual(self.gamma, self.beta)
-        a1, ok = _newton(
-            res,
-            a0,
-            a,
-            lambda acc: res.state(acc, a),
-            self.rtol,
-            self.atol,
-            self.kappa,
-            self.max_iters,
-            self.linear_solver,
-            _CHORD_ITERS if self.newton == "chord" else 0,
-            early_stop=False,
+        a1, result = self._solve(
+            res, a0, a, lambda acc: res.state(acc, a), early_stop=False
         )
         y1 = res.state(a1, a)
-        result = dfx.RESULTS.where(
-            ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
-        )
         return y1, None, dict(y0=y0, y1=y1), None, result
