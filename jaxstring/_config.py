@@ -62,7 +62,10 @@ def default_cache_dir() -> str:
 
 
 def enable_compilation_cache(
-    path: str | None = None, min_compile_s: float = 0.5, warn: bool = True
+    path: str | None = None,
+    min_compile_s: float = 0.5,
+    warn: bool = True,
+    programs: bool = False,
 ):
     """Turn on JAX's persistent compilation cache: compiled programs that took at
     least `min_compile_s` to compile are written to `path` (default
@@ -74,6 +77,12 @@ def enable_compilation_cache(
     ``off``) is set in the environment before equinox is imported: set it before
     importing jaxstring (the ``jaxstring`` command does), or the solves are not
     cached (a `UserWarning` says so unless `warn=False`).
+
+    `programs=True` also saves `simulate`'s traced solves (in `path`/programs), so
+    a later process skips tracing too: a k = 40 pendulum's second-process
+    `simulate` takes 0.56 s of CPU instead of 1.8 s. Loaded programs serve
+    forward solves only (`fit` and `sweep` trace as before); see
+    `jaxstring._programs` for what keys a saved program.
     """
     import warnings
 
@@ -86,6 +95,9 @@ def enable_compilation_cache(
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_s)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    from . import _programs
+
+    _programs.set_program_folder(os.path.join(path, "programs") if programs else None)
     if warn and os.environ.get("EQX_ON_ERROR") not in ("nan", "off"):
         warnings.warn(
             "jaxstring's solves are not written to the compilation cache unless "

@@ -1,5 +1,6 @@
 """simulate(scene, ...) -> Trajectory, and the one solve behind simulate, fit, sweep."""
 
+import dataclasses
 from typing import Any
 
 import diffrax as dfx
@@ -7,8 +8,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from . import _programs
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
+from ._solvers.diffrax_compat import result_code, result_from_code
 from ._solvers.presets import ACCURACY_PRESETS
 from ._solvers.projected import ProjectedSolver
 from ._solvers.registry import build_solver, check_solver, is_adaptive
@@ -177,6 +180,19 @@ def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
 _solve = cpu_jit(solve)
 
 
+def _solve_fields(scene, config, ts):
+    """`solve`'s Trajectory as a dict of arrays (a saved program's output)."""
+    traj = solve(scene, config, ts)
+    fields = {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
+    return fields | {"result": result_code(traj.result)}
+
+
+def _solve_saved(scene, config, ts) -> Trajectory:
+    """`_solve` through a saved program (see `jaxstring._programs`)."""
+    fields = _programs.call(_solve_fields, scene, config, ts)
+    return Trajectory(**(fields | {"result": result_from_code(fields["result"])}))
+
+
 def simulate(
     scene: Scene,
     solver="kvaerno5",
@@ -277,4 +293,6 @@ def simulate(
         step_control=step_control,
         progress=bool(progress),
     )
+    if not config.progress and _programs.usable((scene, config, ts)):
+        return _solve_saved(scene, config, ts)
     return _solve(scene, config, ts)

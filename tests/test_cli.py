@@ -67,7 +67,42 @@ def test_command_caches_the_compiled_solve(tmp_path):
     assert second.returncode == 0, second.stderr
     # Nothing new to compile: the same entries, and the same result.
     assert sorted(f for f in os.listdir(cache) if f.startswith("jit_call")) == solves
+    # ... and the traced solve was saved, so the second process did not trace it.
+    assert [f for f in os.listdir(cache / "programs") if f.endswith(".program")]
     end = [ln for ln in first.stdout.splitlines() if ln.startswith("end mass")]
     assert end and end == [
         ln for ln in second.stdout.splitlines() if ln.startswith("end mass")
     ]
+
+
+def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
+    # A function saved as a program is traced once; after JAX's in-memory caches
+    # are cleared (as in a new process) it is loaded and run, not traced again.
+    import jax
+    import jax.numpy as jnp
+
+    from jaxstring import _programs
+
+    traces = []
+
+    def fn(x, scale):
+        traces.append(1)
+        return {"y": jnp.cumsum(jnp.sin(x) * scale), "n": jnp.sum(x > 0)}
+
+    x = jnp.linspace(-1.0, 2.0, 7)
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        first = _programs.call(fn, x, jnp.asarray(2.0))
+        jax.clear_caches()
+        second = _programs.call(fn, x, jnp.asarray(2.0))
+        other = _programs.call(fn, x, jnp.asarray(3.0))  # new values, same program
+    finally:
+        _programs.set_program_folder(None)
+    assert len(traces) == 1
+    assert len(list(tmp_path.glob("*.program"))) == 1
+    expected = jnp.cumsum(jnp.sin(x) * 2.0)
+    assert jnp.array_equal(first["y"], expected) and jnp.array_equal(
+        second["y"], expected
+    )
+    assert jnp.allclose(other["y"], 1.5 * expected, rtol=1e-15, atol=1e-15)
+    assert int(second["n"]) == 4  # 0.5, 1, 1.5, 2

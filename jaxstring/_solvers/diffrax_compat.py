@@ -18,6 +18,7 @@ the installed and the tested versions, rather than failing deep inside a solve.
 from typing import Any, NamedTuple
 
 import diffrax as dfx
+import jax
 
 
 TESTED = ((0, 7, 2), (0, 8, 0))  # >= 0.7.2, < 0.8
@@ -53,6 +54,13 @@ EVERY_STAGE = CalculateJacobian.every_stage
 def result_code(result):
     """The integer code of a diffrax result (0: success); an array under a trace."""
     return result._value
+
+
+def result_from_code(code):
+    """The diffrax result of an integer result code (the inverse of `result_code`)."""
+    return jax.tree_util.tree_unflatten(
+        jax.tree_util.tree_structure(dfx.RESULTS.successful), [code]
+    )
 
 
 def code_message(code: int) -> str:

@@ -428,7 +428,7 @@ def main(argv=None) -> int:
         if args.cache:
             from .._config import enable_compilation_cache
 
-            enable_compilation_cache(min_compile_s=0.0, warn=False)
+            enable_compilation_cache(min_compile_s=0.0, warn=False, programs=True)
         from .tandem import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:
