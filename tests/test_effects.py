@@ -122,19 +122,8 @@ def test_effect_of_another_system_is_refused_naming_both(system, other):
     scene = _system_scenes()[system]
     effect = _foreign_effects()[other]
     model = type(scene.model).__name__
+    parts = dict(model=scene.model, y0=scene.y0, t1=scene.t1, env=scene.env)
     with pytest.raises(ValueError, match=rf"{type(effect).__name__}.*{model}"):
-        js.Scene(
-            model=scene.model,
-            effects=scene.effects + (effect,),
-            y0=scene.y0,
-            t1=scene.t1,
-            env=scene.env,
-        )
+        js.Scene(effects=scene.effects + (effect,), **parts)
     # ... while the scene's own effects are accepted as they are.
-    js.Scene(
-        model=scene.model,
-        effects=scene.effects,
-        y0=scene.y0,
-        t1=scene.t1,
-        env=scene.env,
-    )
+    js.Scene(effects=scene.effects, **parts)
