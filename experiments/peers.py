@@ -602,11 +602,20 @@ def _band_pattern(peer):
     return ((i - j) <= peer.lband) & ((j - i) <= peer.uband)
 
 
-def scipy_solve(peer: Peer, method, ts, y0, rtol, atol, jac="analytic") -> dict:
+class _Deadline(RuntimeError):
+    pass
+
+
+def scipy_solve(
+    peer: Peer, method, ts, y0, rtol, atol, jac="analytic", cpu_limit_s=None
+) -> dict:
     """scipy's solve_ivp (`method` "BDF", "Radau" or "LSODA") on the peer's compiled
     right-hand side, with its exact Jacobian (`jac="analytic"`: sparse for BDF and
     Radau, LSODA's packed band) or scipy's finite differences on the band pattern
-    (`jac="dq"`). Returns a dict like `cvode_solve`'s."""
+    (`jac="dq"`). A run past `cpu_limit_s` seconds of process CPU stops and fails.
+    Returns a dict like `cvode_solve`'s."""
+    import time
+
     from scipy.integrate import solve_ivp
     from scipy.sparse import csc_matrix
 
@@ -636,16 +645,28 @@ def scipy_solve(peer: Peer, method, ts, y0, rtol, atol, jac="analytic") -> dict:
     else:
         kw["jac_sparsity"] = _band_pattern(peer)
     ts = np.asarray(ts, dtype=np.float64)
-    sol = solve_ivp(
-        peer.f,
-        (ts[0], ts[-1]),
-        np.asarray(y0, dtype=np.float64),
-        method=method,
-        t_eval=ts,
-        rtol=rtol,
-        atol=atol,
-        **kw,
-    )
+    f = peer.f
+    if cpu_limit_s is not None:
+        stop = time.process_time() + cpu_limit_s
+
+        def f(t, y):
+            if time.process_time() > stop:
+                raise _Deadline(f"more than {cpu_limit_s:g} s of CPU")
+            return peer.f(t, y)
+
+    try:
+        sol = solve_ivp(
+            f,
+            (ts[0], ts[-1]),
+            np.asarray(y0, dtype=np.float64),
+            method=method,
+            t_eval=ts,
+            rtol=rtol,
+            atol=atol,
+            **kw,
+        )
+    except _Deadline as e:
+        return {"ys": None, "ok": False, "message": str(e), "nfev": -1, "njev": -1}
     ok = bool(sol.success) and sol.y.shape[1] == len(ts)
     return {
         "ys": sol.y.T if ok else None,

@@ -127,7 +127,7 @@ def _codes(scene, peer, ts, solvers, scipy_methods, callback, budget_s, numba_s)
                 "scipy",
                 peer_run(
                     lambda tol, m=method: peers.scipy_solve(
-                        peer, m, ts, y0, tol, tol, jac=jac
+                        peer, m, ts, y0, tol, tol, jac=jac, cpu_limit_s=budget_s
                     )
                 ),
                 lambda tol: numba_s,
