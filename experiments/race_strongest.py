@@ -27,6 +27,9 @@ Kvaerno5 and BDF at rtol = atol = 1e-3 ... 1e-10 in each pendulum formulation (E
 1e6 and 1e9) and on the tether, and picks per system the fastest that reaches each
 preset's error (race_strongest_presets.{md,csv}).
 
+``--merge a,b,...`` writes one report (race_strongest.*) from parts run as separate
+processes (``--name a`` ...), e.g. one scene each.
+
 Run: ``python experiments/race_strongest.py [--quick] [--presets]``.
 """
 
@@ -278,6 +281,8 @@ def ratio_table(rows, forms, EAs, targets, solvers, field="wall_s"):
                 members = [m for m in members if m in labels]
                 if not members:
                     continue
+                if name.startswith("jaxstring"):
+                    name = "jaxstring " + " / ".join(m.split()[1] for m in members)
                 cells = []
                 for b, t in zip(base, targets):
                     parts = []
@@ -331,11 +336,22 @@ def main(
                 callback=not no_callback, targets=targets, repeats=repeats,
             )  # fmt: skip
     name = "race_strongest" + (f"_{out_name}" if out_name else "")
-    columns = (
-        "formulation EA code tol ok err_m wall_s cpu_s compile_s repeats load_start "
-        "load_end"
-    ).split()
-    loads = sorted(r["load_start"] for r in rows) + sorted(r["load_end"] for r in rows)
+    report(rows, name, forms, EAs, targets, solvers, repeats, k, t1)
+    return rows
+
+
+COLUMNS = (
+    "formulation EA code tol ok err_m wall_s cpu_s compile_s repeats load_start "
+    "load_end"
+).split()
+
+
+def report(rows, name, forms, EAs, targets, solvers, repeats, k, t1, notes=()):
+    """Write the tables (wall and CPU ratios, compile times) and the figure."""
+    import csv
+    import io
+
+    loads = [r["load_start"] for r in rows] + [r["load_end"] for r in rows]
     text = "\n\n".join(
         [
             f"Pendulum k = {k}, alpha = 0.01 s, {t1:g} s. Time to reach each end-mass "
@@ -352,17 +368,58 @@ def main(
             f"{3 * t1 / 4:g}, {t1:g} s from {CVODE} at rtol = atol = {REF_TOL:g} in "
             f"the same variables. Load (1 min) during the scenes: {min(loads):.1f} to "
             f"{max(loads):.1f} on {os.cpu_count()} cores.",
+            *notes,
         ]
     )
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, COLUMNS, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
     common.write_report(
-        name,
-        "Race against the strongest peers",
-        text,
-        csv_lines=[",".join(columns)]
-        + [",".join(str(r[c]) for c in columns) for r in rows],
+        name, "Race against the strongest peers", text, buf.getvalue().splitlines()
     )
     _plot(rows, forms, EAs, name)
+
+
+def _read_rows(path):
+    """Rows of a race CSV (a code label may hold one unquoted comma)."""
+    lines = path.read_text().splitlines()
+    head = lines[0].split(",")
+    rows = []
+    for line in lines[1:]:
+        if line.count('"'):
+            import csv
+
+            parts = next(csv.reader([line]))
+        else:
+            parts = line.split(",")
+            extra = len(parts) - len(head)
+            parts = parts[:2] + [",".join(parts[2 : 3 + extra])] + parts[3 + extra :]
+        r = dict(zip(head, parts))
+        for key in head:
+            if key not in ("formulation", "code", "ok"):
+                r[key] = float(r[key]) if r[key] not in ("", "None") else math.nan
+        r["ok"] = r["ok"] == "True"
+        rows.append(r)
     return rows
+
+
+def merge(parts, repeats=3, solvers=SOLVERS, targets=TARGETS):
+    """One report from the race's parts run as separate processes (each scene its
+    own process: on a shared machine each process gets its own share of the CPU;
+    a part's ratios are measured within its process)."""
+    rows, stamps = [], []
+    for part in parts:
+        path = common.results_dir() / f"race_strongest_{part}.csv"
+        rows += _read_rows(path)
+        md = (common.results_dir() / f"race_strongest_{part}.md").read_text()
+        stamps.append(f"- {part}: {md.splitlines()[2]}")
+    forms = [f for f in FORMULATIONS + ("natural",) if any(
+        r["formulation"] == f for r in rows)]  # fmt: skip
+    EAs = sorted(set(r["EA"] for r in rows))
+    notes = ["Parts (one process per scene, run side by side):", *stamps]
+    report(rows, "race_strongest", forms, EAs, targets, solvers, repeats, 40, 2.0,
+           notes=notes)  # fmt: skip
 
 
 PRESET_TARGETS = {"draft": 1e-3, "balanced": 1e-5, "precise": 1e-7}
@@ -525,6 +582,9 @@ def _plot(rows, forms, EAs, name, targets=TARGETS):
 if __name__ == "__main__":
     import sys
 
+    if "--merge" in sys.argv:
+        merge(sys.argv[sys.argv.index("--merge") + 1].split(","))
+        sys.exit(0)
     if "--presets" in sys.argv:
         # --presets [--quick] [tandem|tether|...]: the systems to measure (a
         # subset writes race_strongest_presets_<first system>.*).
