@@ -12,7 +12,7 @@ from . import _programs
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
 from ._solvers.diffrax_compat import result_code, result_from_code
-from ._solvers.presets import ACCURACY_PRESETS
+from ._solvers.presets import ACCURACY_PRESETS, resolve_preset
 from ._solvers.projected import ProjectedSolver
 from ._solvers.registry import build_solver, check_solver, is_adaptive
 from ._solvers.step_size import STEP_CONTROLS, make_controller
@@ -232,7 +232,8 @@ def simulate(
     - `max_steps`: limit on the number of steps.
     - `progress`: print a text progress meter.
     - `accuracy`: `"draft"`, `"balanced"` or `"precise"` -- a preset of solver and
-      tolerances measured in `experiments/work_precision.py` (see
+      tolerances for the scene's system (each pendulum formulation, the tether, any
+      other model), measured in `experiments/race_strongest.py --presets` (see
       `jaxstring.ACCURACY_PRESETS` for the measured error and time of each); it
       replaces `solver`, `rtol` and `atol`.
     - `project`: for models with a constraint manifold (the Cartesian-tangent
@@ -257,7 +258,7 @@ def simulate(
         raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
     if accuracy is not None:
         check_choice("accuracy", accuracy, tuple(ACCURACY_PRESETS))
-        preset = ACCURACY_PRESETS[accuracy]
+        preset = resolve_preset(accuracy, scene.model)
         solver, rtol, atol = preset["solver"], preset["rtol"], preset["atol"]
     check_solver(solver)
     check_positive("rtol", rtol)

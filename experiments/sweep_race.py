@@ -1,0 +1,157 @@
+"""A 64-member parameter sweep against 64 CVODE-numba runs in the same process.
+
+Question: is one compiled jaxstring sweep faster than the strongest peer run member
+by member? Case: the pendulum in displacement variables (EA = 1e6 N, 2 s, k = 20
+and 40), 64 Kelvin-Voigt constants alpha in [0.005, 0.05] s. The peer: CVODE BDF,
+numba right-hand side, analytic banded Jacobian, band linear solver
+(experiments/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
+jaxstring: `sweep` (`--mode` lockstep or vmap, groups of `--group` sorted by alpha,
+two CPU devices: the script sets `--xla_force_host_platform_device_count=2`) with
+`--solver` (Kvaerno5; BDF runs in vmap mode only) at the loosest of
+`--tols` at which every member is as accurate as CVODE's least accurate member.
+Error: the largest end-mass distance at 0.5, 1, 1.5, 2 s from CVODE-numba at
+rtol = atol = 1e-10, member by member. Times: wall and process CPU, minimum over
+`--repeats` interleaved rounds, compile apart (the sweep's first call minus its
+fastest, numba's compile or cache load).
+
+Run: ``python experiments/sweep_race.py [--quick]``.
+"""
+
+import os
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+    ).strip()
+
+import time
+
+import _common as common
+import numpy as np
+import peers
+from race_strongest import _clock
+
+import jaxstring as js
+from jaxstring._sweep import sweep
+
+
+def _end_mass(traj, scene):
+    del scene
+    return traj.obs["positions"][:, -1, :]
+
+
+def _cvode_loop(k, alphas, ts, tol):
+    out = []
+    for a in alphas:
+        peer = peers.make_rhs("displacement", k, 1e6, alpha=float(a))
+        res = peers.cvode_solve(peer, ts, peer.initial_state(), tol, tol)
+        out.append(
+            peer.end_mass(res["ys"]) if res["ok"] else np.full((len(ts), 2), np.nan)
+        )
+    return np.stack(out)
+
+
+def _errors(ends, refs):
+    return np.array([common.end_mass_error(e[1:], r[1:]) for e, r in zip(ends, refs)])
+
+
+def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode):
+    alphas = np.linspace(0.005, 0.05, members)
+    ts = np.linspace(0.0, 2.0, 5)
+    numba_s = peers.make_rhs("displacement", k, 1e6).warmup()
+    t0 = time.perf_counter()
+    refs = _cvode_loop(k, alphas, ts, 1e-10)
+    print(f"k={k}: references in {time.perf_counter() - t0:.1f} s", flush=True)
+    base = js.scenes.string_pendulum(k=k, EA=1e6, t1=2.0)
+
+    def run_sweep(tol):
+        res = sweep(base, {"alpha": alphas}, _end_mass, solver=solver, rtol=tol,
+                    atol=tol, ts=ts, mode=mode, batch_size=group, order="sort",
+                    devices="auto", max_steps=common.MAX_STEPS)  # fmt: skip
+        return np.asarray(res.out), bool(np.all(res.ok))
+
+    cv_end, cv_wall, cv_cpu = _clock(lambda: _cvode_loop(k, alphas, ts, cvode_tol))
+    cv_err = _errors(cv_end, refs)
+    first = None
+    chosen = None
+    for tol in tols:  # loose to tight: the first at which every member is as good
+        (end, ok), wall, _ = _clock(lambda: run_sweep(tol))
+        first = wall if first is None else first
+        err = _errors(end, refs)
+        print(f"k={k} sweep {solver} tol={tol:g}: ok={ok} max err "
+              f"{np.max(err):.2e} (CVODE {np.max(cv_err):.2e}) wall {wall:.2f} s",
+              flush=True)  # fmt: skip
+        if ok and np.max(err) <= np.max(cv_err):
+            chosen = (tol, err)
+            break
+    if chosen is None:
+        return dict(k=k, members=members, solver=solver, tol=None)
+    tol, err = chosen
+    sw_wall, sw_cpu = [], []
+    cv_walls, cv_cpus = [cv_wall], [cv_cpu]
+    for _ in range(repeats):
+        _, w, c = _clock(lambda: run_sweep(tol))
+        sw_wall.append(w)
+        sw_cpu.append(c)
+        _, w, c = _clock(lambda: _cvode_loop(k, alphas, ts, cvode_tol))
+        cv_walls.append(w)
+        cv_cpus.append(c)
+    return dict(
+        k=k, members=members, solver=solver, tol=tol, cvode_tol=cvode_tol,
+        sweep_max_err_m=float(np.max(err)), cvode_max_err_m=float(np.max(cv_err)),
+        sweep_wall_s=min(sw_wall), sweep_cpu_s=min(sw_cpu),
+        cvode_wall_s=min(cv_walls), cvode_cpu_s=min(cv_cpus),
+        speedup_wall=min(cv_walls) / min(sw_wall),
+        speedup_cpu=min(cv_cpus) / min(sw_cpu),
+        sweep_compile_s=max(first - min(sw_wall), 0.0), numba_compile_s=numba_s,
+        load=os.getloadavg()[0],
+    )  # fmt: skip
+
+
+def main(quick=False, ks=None, members=None, solver="kvaerno5", tols=None,
+         cvode_tol=1e-6, repeats=None, group=16, mode="lockstep"):  # fmt: skip
+    common.set_quick(quick)
+    ks = ks or ([8] if quick else [20, 40])
+    members = members or (8 if quick else 64)
+    tols = tols or [1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
+    repeats = repeats or (1 if quick else 2)
+    rows = [
+        race_k(k, members, solver, tols, cvode_tol, repeats, min(group, members), mode)
+        for k in ks
+    ]
+    cols = (
+        "k members solver tol cvode_tol sweep_max_err_m cvode_max_err_m sweep_wall_s "
+        "cvode_wall_s speedup_wall sweep_cpu_s cvode_cpu_s speedup_cpu "
+        "sweep_compile_s numba_compile_s load"
+    ).split()
+    common.write_table(
+        "sweep_race",
+        rows,
+        cols,
+        f"{members}-member alpha sweep vs {members} CVODE-numba runs, one process",
+        notes=[
+            "speedup: CVODE loop time / sweep time (> 1: the sweep is faster); "
+            f"minimum over {repeats + 1} CVODE and {repeats} sweep rounds, "
+            "interleaved.",
+            f"sweep: {mode}, groups of {min(group, members)} sorted by alpha, 2 "
+            "CPU devices; tol: the loosest of the list at which every member's "
+            "error is <= CVODE's largest member error.",
+            "error: end-mass distance at 0.5, 1, 1.5, 2 s from CVODE-numba at 1e-10.",
+        ],
+    )
+    return rows
+
+
+if __name__ == "__main__":
+    common.run_study(
+        main,
+        __doc__,
+        lists={"ks": int, "tols": float},
+        members=dict(type=int, default=None),
+        solver=dict(default="kvaerno5"),
+        mode=dict(default="lockstep", choices=("lockstep", "vmap")),
+        cvode_tol=dict(flag="cvode-tol", type=float, default=1e-6),
+        group=dict(type=int, default=16),
+    )
