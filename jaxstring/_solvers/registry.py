@@ -149,9 +149,7 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
             root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
         )
     if solver == "implicit_euler":
-        return ImplicitEuler(
-            root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
-        )
+        return ImplicitEuler(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)
     if solver == "implicit_euler_fixed":
         # theta = 1 with damped full Newton (see fixed_step.py): the undamped
         # StageNewton(newton=True) cycles at k = 40, EA >= 1e6, dt = 0.005.
