@@ -126,19 +126,67 @@ class KelvinVoigt(AbstractTensionLaw):
 class Slack(AbstractTensionLaw):
     """Tension-only string: no compression, and no force at all while slack.
 
-    N = max(N, 0) where eps > 0, and N = 0 where eps <= 0 (the string cannot push,
-    and a slack string carries no dissipative force either, as in MoorDyn). Stores
-    elastic energy EA/2 max(eps, 0)^2.
+    Sharp law (`smoothing=0`): N = max(N, 0) where eps > 0, and N = 0 where
+    eps <= 0 (the string cannot push, and a slack string carries no dissipative
+    force either, as in MoorDyn); stored elastic energy EA/2 max(eps, 0)^2.
+
+    Smoothed law (`smoothing` = eps_s > 0): the onset of tension is blended over
+    the strains [0, eps_s], so that the force is continuously differentiable:
+
+        N = EA g(eps / eps_s) eps_s r(N_in / (EA eps_s)),
+
+    with z clipped to [0, 1], the gate g(z) = 3 z^2 - 2 z^3 and the ramp
+    r(z) = 2 z^2 - z^3 for z < 1, r(z) = z above (N_in: the force before this law,
+    EA (eps + alpha eps') under Kelvin-Voigt). A compressed string (eps <= 0) and a
+    pushing one (N_in <= 0) carry no force, exactly as under the sharp law; at
+    eps >= eps_s with N_in >= EA eps_s the force is the sharp law's. In between it
+    is smaller, never negative: for an elastic string by at most 0.317 EA eps_s
+    (max of z - g(z) r(z), at z = 0.456); for a string snapping taut, the viscous
+    force EA alpha eps' is also cut while eps < eps_s, an impulse of at most
+    EA alpha eps_s per element and monotone crossing of the blend. Stored elastic
+    energy: EA eps_s^2 (6 z^5/5 - 7 z^6/6 + 2 z^7/7) below eps_s,
+    EA (eps^2/2 - 19/105 eps_s^2) above.
+
+    The sharp law's kinks (zero strain, zero force), on which the elements of a
+    falling slack string sit, make error-controlled implicit solvers in natural
+    variables reject steps down to 1e-13 s; with eps_s = 1e-7 (the pendulum scene's
+    default in natural variables) the paper's snap at k = 40 completes and the end
+    mass moves by about 4e-5 m (EA = 1e8 N) to 1.4e-4 m (EA = 1e6 N), 15-30x less
+    per decade of eps_s below (docs/pendulum.md, "Slack and snap").
+
+    **Arguments:**
+
+    - `smoothing`: the transition strain eps_s (>= 0, dimensionless; 0: the sharp
+      law).
     """
 
+    smoothing: float = eqx.field(static=True, default=0.0)
     order: ClassVar[int] = 10
 
+    def __check_init__(self):
+        check_nonnegative("smoothing", self.smoothing)
+
     def tension(self, N, eps, eps_dot, EA):
-        del eps_dot, EA
-        return jnp.where(eps > 0, jnp.maximum(N, 0.0), 0.0)
+        del eps_dot
+        w = self.smoothing
+        if w == 0:
+            return jnp.where(eps > 0, jnp.maximum(N, 0.0), 0.0)
+        z = jnp.clip(eps / w, 0.0, 1.0)
+        gate = z * z * (3.0 - 2.0 * z)
+        scale = EA * w
+        zu = jnp.clip(N / scale, 0.0, 1.0)
+        return gate * jnp.where(N < scale, scale * zu * zu * (2.0 - zu), N)
 
     def elastic_strain(self, eps):
-        return jnp.maximum(eps, 0.0)
+        w = self.smoothing
+        if w == 0:
+            return jnp.maximum(eps, 0.0)
+        # The strain e with EA e^2 / 2 = the energy stored at eps (see above).
+        z = jnp.clip(eps / w, 0.0, 1.0)
+        blend = w * w * z**5 * (6.0 / 5.0 - 7.0 / 6.0 * z + 2.0 / 7.0 * z * z)
+        two_w = jnp.where(eps < w, 2.0 * blend, eps * eps - 38.0 / 105.0 * w * w)
+        positive = two_w > 0
+        return jnp.where(positive, jnp.sqrt(jnp.where(positive, two_w, 1.0)), 0.0)
 
 
 EFFECTS = {
