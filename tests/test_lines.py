@@ -248,3 +248,19 @@ def test_wd0050_dynamic_tension_gradient(wd0050):
         e = jnp.zeros(2).at[i].set(h)
         fd = (tension(p0 + e) - tension(p0 - e)) / (2 * h)
         assert float(g[i]) == pytest.approx(float(fd), rel=1e-4)
+
+
+def test_cli_bad_input_exits_2(tmp_path, capsys):
+    from jaxstring.cli.main import main
+
+    rows = _deck_lines()
+    k = next(i for i, r in enumerate(rows) if r.startswith("2     Free"))
+    rows[k] = rows[k].replace("1E5", "heavy")
+    deck = _write(tmp_path, "\n".join(rows))
+    assert main(["run", "moordyn", deck, "--out", str(tmp_path)]) == 2
+    assert f"line {k + 1}, column" in capsys.readouterr().err
+    assert main(["run", "moordyn", deck, "--rtol", "-1"]) == 2
+    assert "`rtol` must be" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # argparse: unknown option
+        main(["run", "moordyn", deck, "--bogus", "1"])
+    assert e.value.code == 2
