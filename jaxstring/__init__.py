@@ -4,6 +4,7 @@ import importlib.metadata
 
 from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
+    lines as lines,
     pendulum as pendulum,
     scenes as scenes,
     tandem as tandem,

@@ -219,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
         dest="scene",
         metavar="SCENE",
         required=True,
-        help="one of: " + ", ".join(SCENES) + ", tandem-...",
+        help="one of: " + ", ".join(SCENES) + ", tandem-..., moordyn",
     )
     for name, runner in SCENES.items():
         sp = scene_parsers.add_parser(name, help=runner.help, description=runner.help)
@@ -241,6 +241,9 @@ def build_parser() -> argparse.ArgumentParser:
         )
         _animation_arguments(sp)
         _cache_arguments(sp)
+    from . import moordyn
+
+    moordyn.add_parser(scene_parsers, _common_arguments, _cache_arguments)
     return parser
 
 
@@ -429,6 +432,10 @@ def main(argv=None) -> int:
             from .._config import enable_compilation_cache
 
             enable_compilation_cache(min_compile_s=0.0, warn=False, programs=True)
+        if args.scene == "moordyn":
+            from . import moordyn
+
+            return moordyn.run(args)
         from .tandem import TANKER_SCENES, run_tanker
 
         if args.scene in TANKER_SCENES:

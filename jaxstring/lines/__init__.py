@@ -1,0 +1,58 @@
+"""Mooring-line networks (MoorDyn's lumped-mass model): lines of lumped masses
+between fixed, prescribed and free points; weight and buoyancy, Morison drag and
+added mass in a current, seabed contact with smooth friction; time-varying
+unstretched lengths; MoorDyn v2 decks in and MoorDyn-style output channels out.
+
+Model and points in `models`, loads in `effects`, decks and outputs in `moordyn`.
+"""
+
+from .effects import (
+    AbstractLineLoad as AbstractLineLoad,
+    Drag as Drag,
+    Gravity as Gravity,
+    LineForces as LineForces,
+    LineKinematics as LineKinematics,
+    Seabed as Seabed,
+)
+from .models import (
+    FreePoint as FreePoint,
+    LineNetwork as LineNetwork,
+    MotionEnd as MotionEnd,
+    equilibrium as equilibrium,
+    initial_shape as initial_shape,
+)
+from .moordyn import (
+    MoorDynDeck as MoorDynDeck,
+    case_path as case_path,
+    deck_scene as deck_scene,
+    output_channels as output_channels,
+    parse_moordyn as parse_moordyn,
+    read_moordyn as read_moordyn,
+    read_motion as read_motion,
+    static_tensions as static_tensions,
+    write_outputs as write_outputs,
+)
+
+
+__all__ = [
+    "AbstractLineLoad",
+    "Drag",
+    "Gravity",
+    "LineForces",
+    "LineKinematics",
+    "Seabed",
+    "FreePoint",
+    "LineNetwork",
+    "MotionEnd",
+    "equilibrium",
+    "initial_shape",
+    "MoorDynDeck",
+    "case_path",
+    "deck_scene",
+    "output_channels",
+    "parse_moordyn",
+    "read_motion",
+    "read_moordyn",
+    "static_tensions",
+    "write_outputs",
+]

@@ -1,0 +1,793 @@
+"""A network of mooring lines: lumped masses between points (MoorDyn's v2 model).
+
+Lines join points. Each line of unstretched length L(t) is cut into N equal segments
+(N + 1 nodes, the end nodes sitting on the line's points); node i stands for half of
+each adjacent segment. A point is held (`FixedEnd`), moved on a prescribed path
+(`PrescribedEnd`: a table; `MotionEnd`: a JAX function of time), or free
+(`FreePoint`: mass, volume, CdA, Ca); the end nodes of every line attached to a free
+point move with it and add their mass and loads to it.
+
+Per line: diameter d, mass per length w, axial stiffness EA, internal damping BA
+(a negative value -zeta is MoorDyn's damping ratio: BA = zeta (L/N) sqrt(EA w)), and
+the hydrodynamic coefficients Cd, Ca, CdAx, CaAx. Segment s between nodes i and i+1
+of stretched length l_s and unstretched length l = L/N carries
+
+    T_s = EA max(l_s - l, 0)/l + BA (dl_s/dt - (l_s/l) dl/dt)/l
+
+along its axis (a cable cannot push; the damping acts on the rate of the strain,
+which includes the change of the unstretched length when a line is hauled in or paid
+out). Node i has mass m_i = w l_i and the added-mass matrix
+rho V_i (Ca (I - q q^T) + CaAx q q^T) about its axis q_i (V_i the submerged volume);
+the loads (weight and buoyancy, Morison drag relative to the current, seabed
+contact) are effects (`jaxstring.lines.effects`).
+
+State: node-major `(n, 6)`, row = (position, velocity) of one free body: the interior
+nodes of each line in order and each free point next to the first line that reaches
+it, so that the Jacobian is block-banded with the bandwidth `node_bandwidth` returns
+(1 for a chain of lines and points), and the implicit solvers' Newton steps cost
+O(nodes).
+"""
+
+import math
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._geometry import safe_norm
+from .._model import AbstractModel
+from .._validate import (
+    check_finite,
+    check_int,
+    check_nonnegative,
+    check_positive,
+    check_shape,
+)
+from ..tether.models import (
+    AbstractEnd,
+    EndKinematics,
+    PiecewiseLinear,
+    _dot,
+    _f64,
+    _param,
+)
+from .effects import AbstractLineLoad, LineKinematics
+
+
+class MotionEnd(AbstractEnd):
+    """A point moved by any JAX function of time: `fn(t, params) -> (3,)`, m.
+
+    Velocity and acceleration are its first two time derivatives (forward-mode
+    autodiff). `fn` is structure; its parameters `params` (a PyTree of arrays) stay
+    differentiable and vmappable.
+    """
+
+    fn: object = eqx.field(static=True)
+    params: object = None
+
+    def __check_init__(self):
+        if not callable(self.fn):
+            raise ValueError(f"`fn` must be callable; got {self.fn!r}.")
+
+    def kinematics(self, t):
+        t = _f64(t)
+
+        def pos(s):
+            return jnp.asarray(self.fn(s, self.params), jnp.float64)
+
+        def vel(s):
+            return jax.jvp(pos, (s,), (jnp.ones_like(s),))
+
+        (p, v), (_, a) = jax.jvp(vel, (t,), (jnp.ones_like(t),))
+        return EndKinematics(p, v, a)
+
+
+class FreePoint(eqx.Module):
+    """A free point (a clump weight, a buoy, a pendulum's bob).
+
+    **Arguments:** `position` (its initial position, `(3,)`, m), `mass` (kg),
+    `volume` (m^3), `CdA` (drag coefficient times area, m^2), `Ca` (added-mass
+    coefficient on rho V), all >= 0.
+    """
+
+    position: Float[Array, "3"] = _param()
+    mass: Float[Array, ""] = _param(default=0.0)
+    volume: Float[Array, ""] = _param(default=0.0)
+    CdA: Float[Array, ""] = _param(default=0.0)
+    Ca: Float[Array, ""] = _param(default=0.0)
+
+    def __check_init__(self):
+        check_shape("position", self.position, (3,), "m")
+        check_finite("position", self.position)
+        for name, unit in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
+            check_shape(name, getattr(self, name), (), unit)
+            check_nonnegative(name, getattr(self, name), unit)
+        check_nonnegative("Ca", self.Ca)
+
+
+_LINE_PARAMS = ("L", "d", "w", "EA", "BA", "Cd", "Ca", "CdAx", "CaAx")
+
+
+class _Topology(eqx.Module):
+    """Static index arrays of a network (NumPy, built at trace time)."""
+
+    n_state: int
+    body: np.ndarray  # line node -> body (state rows, then held points)
+    node_line: np.ndarray  # line node -> line
+    prev: np.ndarray  # line node -> previous line node (itself at end A)
+    next: np.ndarray  # line node -> next line node (itself at end B)
+    seg_lo: np.ndarray  # segment -> its node at the A side
+    seg_line: np.ndarray
+    end_a: np.ndarray  # line -> its line node at end A
+    end_b: np.ndarray
+    free_rows: np.ndarray  # free point (in `free` order) -> state row
+    free: tuple  # indices of the free points in `points`
+    held: tuple  # indices of the held points in `points`
+    point_body: np.ndarray  # point -> body
+
+
+def _topology(points, attach, segments) -> _Topology:
+    free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
+    held = tuple(i for i, p in enumerate(points) if not isinstance(p, FreePoint))
+    row = {}
+    n = 0
+    interior = []
+    for (a, b), N in zip(attach, segments):
+        if a in free and a not in row:
+            row[a] = n
+            n += 1
+        interior.append(n)
+        n += N - 1
+        if b in free and b not in row:
+            row[b] = n
+            n += 1
+    for i in free:
+        if i not in row:
+            row[i] = n
+            n += 1
+    n_state = n
+    point_body = np.zeros(len(points), int)
+    for i in free:
+        point_body[i] = row[i]
+    for j, i in enumerate(held):
+        point_body[i] = n_state + j
+    body, node_line, prev, nxt, seg_lo, seg_line, end_a, end_b = ([] for _ in range(8))
+    m = 0
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        rows = [point_body[a]] + [interior[k] + i for i in range(N - 1)]
+        rows.append(point_body[b])
+        body += rows
+        node_line += [k] * (N + 1)
+        prev += [m] + [m + i - 1 for i in range(1, N + 1)]
+        nxt += [m + i + 1 for i in range(N)] + [m + N]
+        seg_lo += [m + i for i in range(N)]
+        seg_line += [k] * N
+        end_a.append(m)
+        end_b.append(m + N)
+        m += N + 1
+    arr = lambda x: np.asarray(x, dtype=np.int32)
+    return _Topology(
+        n_state=n_state,
+        body=arr(body),
+        node_line=arr(node_line),
+        prev=arr(prev),
+        next=arr(nxt),
+        seg_lo=arr(seg_lo),
+        seg_line=arr(seg_line),
+        end_a=arr(end_a),
+        end_b=arr(end_b),
+        free_rows=arr([row[i] for i in free]),
+        free=free,
+        held=held,
+        point_body=arr(point_body),
+    )
+
+
+def _solve3(M, f):
+    """x = M^-1 f for a batch of 3 x 3 matrices `(n, 3, 3)` (Cramer's rule)."""
+    c0 = jnp.cross(M[:, 1], M[:, 2])
+    c1 = jnp.cross(M[:, 2], M[:, 0])
+    c2 = jnp.cross(M[:, 0], M[:, 1])
+    det = _dot(M[:, 0], c0)
+    # rows of M^-1 transposed: inverse = [c0 c1 c2] / det (columns)
+    inv = jnp.stack([c0, c1, c2], axis=-1) / det[:, None, None]
+    return jnp.einsum("nij,nj->ni", inv, f)
+
+
+class _State(eqx.Module):
+    """Everything one evaluation computes (not user-facing)."""
+
+    kin: LineKinematics
+    seg_tension: Array  # (S,) axial force incl. damping, N
+    seg_strain: Array  # (S,)
+    seg_l: Array  # unstretched segment lengths (S,)
+    node_force: Array  # (M, 3) total force on each line node, N
+    node_mass: Array  # (M, 3, 3) mass matrix of each line node, kg
+    body_force: Array  # (B, 3)
+    body_mass: Array  # (B, 3, 3)
+    held_acc: Array  # (H, 3) accelerations of the held points
+    held_pos: Array
+    held_vel: Array
+    lengths: Array  # unstretched lengths of the lines (n_lines,)
+
+
+class LineNetwork(AbstractModel):
+    """Mooring lines of lumped masses between points (see the module docstring).
+
+    **Arguments:**
+
+    - `points`: tuple of point conditions: `FixedEnd`, `PrescribedEnd` (a table of
+      positions), `MotionEnd` (a function of time), `FreePoint`.
+    - `attach`: `((a, b), ...)` per line, the indices in `points` of its ends A and
+      B (structure).
+    - `segments`: number of segments N per line (structure, >= 1).
+    - `L` (unstretched length, m), `d` (m), `w` (mass per length, kg/m), `EA` (N),
+      `BA` (N s; < 0: minus the damping ratio), `Cd`, `Ca`, `CdAx`, `CaAx`: one
+      value per line, shape `(n_lines,)` (array leaves: differentiable, vmappable).
+    - `lengths`: per line, None or a `PiecewiseLinear` unstretched length L(t), m
+      (hauling in or paying out; MoorDyn's SetLineUnstretchedLength/Vel).
+      Default: all None (L constant).
+    - `line_ids`, `point_ids`: labels (structure; default 1, 2, ...).
+    """
+
+    points: tuple
+    attach: tuple = eqx.field(static=True)
+    segments: tuple = eqx.field(static=True)
+    L: Float[Array, " n"] = _param()
+    d: Float[Array, " n"] = _param()
+    w: Float[Array, " n"] = _param()
+    EA: Float[Array, " n"] = _param()
+    BA: Float[Array, " n"] = _param()
+    Cd: Float[Array, " n"] = _param()
+    Ca: Float[Array, " n"] = _param()
+    CdAx: Float[Array, " n"] = _param()
+    CaAx: Float[Array, " n"] = _param()
+    lengths: tuple | None = None
+    line_ids: tuple | None = eqx.field(static=True, default=None)
+    point_ids: tuple | None = eqx.field(static=True, default=None)
+    projects: ClassVar[bool] = False
+    accepts: ClassVar[tuple[type, ...]] = (AbstractLineLoad,)
+
+    def __check_init__(self):
+        if not isinstance(self.points, tuple) or not self.points:
+            raise ValueError(
+                f"`points` must be a non-empty tuple; got {self.points!r}."
+            )
+        for i, p in enumerate(self.points):
+            if not isinstance(p, (AbstractEnd, FreePoint)):
+                raise ValueError(
+                    f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd or "
+                    f"FreePoint; got {p!r}."
+                )
+        n = len(self.attach)
+        if n == 0:
+            raise ValueError("`attach` must name at least one line (a, b).")
+        if len(self.segments) != n:
+            raise ValueError(
+                f"`segments` must have one entry per line ({n}); got {self.segments!r}."
+            )
+        for k, ab in enumerate(self.attach):
+            if (
+                not isinstance(ab, tuple)
+                or len(ab) != 2
+                or not all(isinstance(i, int) and 0 <= i < len(self.points) for i in ab)
+                or ab[0] == ab[1]
+            ):
+                raise ValueError(
+                    f"`attach[{k}]` must be two different point indices in "
+                    f"0..{len(self.points) - 1}; got {ab!r}."
+                )
+            check_int(f"segments[{k}]", self.segments[k], 1)
+        for name in _LINE_PARAMS:
+            check_shape(name, getattr(self, name), (n,))
+            check_finite(name, getattr(self, name))
+        for name in ("L", "d", "w", "EA"):
+            check_positive(name, getattr(self, name))
+        for name in ("Cd", "Ca", "CdAx", "CaAx"):
+            check_nonnegative(name, getattr(self, name))
+        if self.lengths is not None:
+            if len(self.lengths) != n or not all(
+                s is None or isinstance(s, PiecewiseLinear) for s in self.lengths
+            ):
+                raise ValueError(
+                    "`lengths` must hold one entry per line: None or a PiecewiseLinear "
+                    f"unstretched length (m); got {self.lengths!r}."
+                )
+
+    # -- structure
+    @property
+    def n_lines(self) -> int:
+        return len(self.attach)
+
+    @property
+    def topology(self) -> _Topology:
+        return _topology(self.points, self.attach, self.segments)
+
+    def state_shape(self):
+        return (self.topology.n_state, 6)
+
+    def project(self, y):
+        return y
+
+    def node_bandwidth(self, effects):
+        del effects
+        top = self.topology
+        lo, hi = top.body[top.seg_lo], top.body[top.seg_lo + 1]
+        both = (lo < top.n_state) & (hi < top.n_state)
+        return max(1, int(np.max(np.abs(lo - hi)[both], initial=0)))
+
+    def second_order(self, effects):
+        del effects
+        return 3
+
+    def stage_jacobians(self, effects):
+        del effects
+        return True
+
+    def damping_BA(self):
+        """Internal damping BA per line, N s (MoorDyn: -zeta (L/N) sqrt(EA w) for a
+        negative input -zeta, with L the line's initial unstretched length)."""
+        N = jnp.asarray(self.segments, jnp.float64)
+        ratio = -self.BA * self.L / N * jnp.sqrt(self.EA * self.w)
+        return jnp.where(self.BA < 0, ratio, self.BA)
+
+    def unstretched_lengths(self, t):
+        """Unstretched length L(t) and its rate, per line, m and m/s."""
+        if self.lengths is None:
+            return self.L, jnp.zeros_like(self.L)
+        vals, rates = [], []
+        for k, s in enumerate(self.lengths):
+            if s is None:
+                vals.append(self.L[k])
+                rates.append(jnp.zeros_like(self.L[k]))
+            else:
+                vals.append(s.value(t))
+                rates.append(s.rate(t))
+        return jnp.stack(vals), jnp.stack(rates)
+
+    def held_kinematics(self, t):
+        """Positions, velocities, accelerations of the held points, `(H, 3)` each."""
+        held = [self.points[i].kinematics(t) for i in self.topology.held]
+        if not held:
+            z = jnp.zeros((0, 3))
+            return z, z, z
+        stack = lambda name: jnp.stack([getattr(k, name) for k in held])
+        return stack("position"), stack("velocity"), stack("acceleration")
+
+    def _free_params(self):
+        free = [self.points[i] for i in self.topology.free]
+        if not free:
+            z = jnp.zeros((0,))
+            return z, z, z, z
+        stack = lambda name: jnp.stack([getattr(p, name) for p in free])
+        return stack("mass"), stack("volume"), stack("CdA"), stack("Ca")
+
+    # -- one evaluation
+    def _state(self, t, y, effects, env) -> _State:
+        top = self.topology
+        for e in effects:
+            if not isinstance(e, AbstractLineLoad):
+                raise ValueError(
+                    "a LineNetwork takes line effects (Gravity, Drag, Seabed); got "
+                    f"{type(e).__name__} in `effects`."
+                )
+        hp, hv, ha = self.held_kinematics(t)
+        Bp = jnp.concatenate([y[:, :3], hp], axis=0)
+        Bv = jnp.concatenate([y[:, 3:], hv], axis=0)
+        R, V = Bp[top.body], Bv[top.body]
+        lo, hi = top.seg_lo, top.seg_lo + 1
+        sl = top.seg_line
+        dX = R[hi] - R[lo]
+        lstr = safe_norm(dX)
+        qs = dX / jnp.where(lstr > 0, lstr, 1.0)[:, None]
+        ldstr = _dot(qs, V[hi] - V[lo])
+        Lt, Ldot = self.unstretched_lengths(t)
+        Nl = jnp.asarray(self.segments, jnp.float64)
+        l = (Lt / Nl)[sl]
+        ldot = (Ldot / Nl)[sl]
+        strain = (lstr - l) / l
+        rate = (ldstr - lstr * ldot / l) / l
+        T = self.EA[sl] * jnp.maximum(strain, 0.0) + self.damping_BA()[sl] * rate
+        M = top.body.shape[0]
+        seg_f = T[:, None] * qs
+        node_f = jnp.zeros((M, 3)).at[lo].add(seg_f).at[hi].add(-seg_f)
+        # Submerged fraction of each segment (the still-water surface is z = 0).
+        zlo, zhi = R[lo, 2], R[hi, 2]
+        zmin, zmax = jnp.minimum(zlo, zhi), jnp.maximum(zlo, zhi)
+        cross = (zmax > 0) & (zmin < 0)
+        frac = -zmin / jnp.where(cross, zmax - zmin, 1.0)
+        F = jnp.where(zmax <= 0, 1.0, jnp.where(zmin >= 0, 0.0, frac))
+        half = 0.5 * l
+        length = jnp.zeros(M).at[lo].add(half).at[hi].add(half)
+        sub = jnp.zeros(M).at[lo].add(half * F).at[hi].add(half * F)
+        nl = top.node_line
+        area = 0.25 * jnp.pi * self.d**2
+        mass = self.w[nl] * length
+        volume = area[nl] * sub
+        dq = R[top.next] - R[top.prev]
+        q = dq / jnp.where(safe_norm(dq) > 0, safe_norm(dq), 1.0)[:, None]
+        fm, fv, fcda, fca = self._free_params()
+        free_idx = np.asarray(top.free, np.int32)
+        fp = Bp[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
+        fvel = Bv[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
+        kin = LineKinematics(
+            positions=R,
+            velocities=V,
+            tangents=q,
+            mass=mass,
+            volume=volume,
+            length=length,
+            submerged_length=sub,
+            diameter=self.d[nl],
+            Cd=self.Cd[nl],
+            CdAx=self.CdAx[nl],
+            point_positions=fp,
+            point_velocities=fvel,
+            point_mass=fm,
+            point_volume=fv,
+            point_CdA=fcda,
+        )
+        point_f = jnp.zeros_like(fp)
+        for e in effects:
+            f = e.forces(t, kin, env)
+            node_f = node_f + f.nodes
+            point_f = point_f + f.points
+        eye = jnp.eye(3)
+        Q = q[:, :, None] * q[:, None, :]
+        added = (env.rho_water * volume)[:, None, None] * (
+            self.Ca[nl][:, None, None] * (eye - Q) + self.CaAx[nl][:, None, None] * Q
+        )
+        node_m = mass[:, None, None] * eye + added
+        nB = top.n_state + len(top.held)
+        body_f = jnp.zeros((nB, 3)).at[top.body].add(node_f)
+        body_m = jnp.zeros((nB, 3, 3)).at[top.body].add(node_m)
+        if len(top.free):
+            rows = top.free_rows
+            body_f = body_f.at[rows].add(point_f)
+            pm = fm + env.rho_water * fv * fca
+            body_m = body_m.at[rows].add(pm[:, None, None] * eye)
+        return _State(
+            kin=kin,
+            seg_tension=T,
+            seg_strain=strain,
+            seg_l=l,
+            node_force=node_f,
+            node_mass=node_m,
+            body_force=body_f,
+            body_mass=body_m,
+            held_acc=ha,
+            held_pos=hp,
+            held_vel=hv,
+            lengths=Lt,
+        )
+
+    def _accelerations(self, st: _State):
+        n = self.topology.n_state
+        return _solve3(st.body_mass[:n], st.body_force[:n])
+
+    def vector_field(self, t, y, effects, env):
+        st = self._state(t, y, effects, env)
+        return jnp.concatenate([y[:, 3:], self._accelerations(st)], axis=1)
+
+    def end_forces(self, st: _State, acc):
+        """Forces of each line on its end points A and B, `(n_lines, 3)` each, N:
+        the end node's segment force and loads less its inertia (it moves with the
+        point)."""
+        top = self.topology
+        body_acc = jnp.concatenate([acc, st.held_acc], axis=0)
+
+        def at(nodes):
+            a = body_acc[top.body[nodes]]
+            inertia = jnp.einsum("nij,nj->ni", st.node_mass[nodes], a)
+            return st.node_force[nodes] - inertia
+
+        return at(top.end_a), at(top.end_b)
+
+    def observables(self, t, y, effects, env):
+        """`nodes` (every line node, `(M, 3)`, m), `node_velocities`, segment
+        `tension` (`(S,)`, N, incl. damping) and `strain`, `end_force_a`,
+        `end_force_b` (`(n_lines, 3)`, N, on the points) and their magnitudes
+        `tension_a`, `tension_b` (`(n_lines,)`), `point_force` (net force of the
+        lines on each point, `(n_points, 3)`), `lengths` (unstretched, m),
+        `positions` (the free bodies, `(n, 3)`) and `energy` (kinetic + elastic +
+        the potential of `Gravity` when the scene has it, J)."""
+        st = self._state(t, y, effects, env)
+        acc = self._accelerations(st)
+        fa, fb = self.end_forces(st, acc)
+        top = self.topology
+        pf = jnp.zeros((len(self.points), 3))
+        pf = pf.at[np.asarray([a for a, _ in self.attach])].add(fa)
+        pf = pf.at[np.asarray([b for _, b in self.attach])].add(fb)
+        kin = st.kin
+        v = y[:, 3:]
+        ke = 0.5 * jnp.sum(
+            jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
+        )
+        EAs = self.EA[top.seg_line]
+        elastic = 0.5 * jnp.sum(EAs * st.seg_l * jnp.maximum(st.seg_strain, 0.0) ** 2)
+        pot = jnp.zeros(())
+        from .effects import Gravity
+
+        if any(isinstance(e, Gravity) for e in effects):
+            inner = np.ones(top.body.shape[0], bool)
+            inner[top.body >= top.n_state] = False  # nodes on held points
+            net = kin.mass - env.rho_water * kin.volume
+            pot = env.g * jnp.sum(jnp.where(inner, net * kin.positions[:, 2], 0.0))
+            if len(top.free):
+                pnet = kin.point_mass - env.rho_water * kin.point_volume
+                pot = pot + env.g * jnp.sum(pnet * kin.point_positions[:, 2])
+        return {
+            "nodes": kin.positions,
+            "node_velocities": kin.velocities,
+            "positions": y[:, :3],
+            "tension": st.seg_tension,
+            "strain": st.seg_strain,
+            "end_force_a": fa,
+            "end_force_b": fb,
+            "tension_a": safe_norm(fa),
+            "tension_b": safe_norm(fb),
+            "point_force": pf,
+            "lengths": st.lengths,
+            "energy": ke + elastic + pot,
+        }
+
+    def line_nodes(self, k: int) -> np.ndarray:
+        """Indices of line `k`'s nodes (A to B) in the `nodes` observable."""
+        start = sum(N + 1 for N in self.segments[:k])
+        return np.arange(start, start + self.segments[k] + 1)
+
+
+# ---------------------------------------------------------------------------
+# Static equilibrium
+
+
+def _catenary(pa, pb, L, w, N, seabed_z, EA):
+    """Node positions `(N + 1, 3)` of an inextensible catenary of length L and
+    weight w per length (N/m) from pa to pb, lying on the plane z = seabed_z from
+    the lower end where it reaches it; plus the largest tension estimate, N.
+    A taut or weightless line is straight."""
+    pa, pb = np.asarray(pa, float), np.asarray(pb, float)
+    s = np.linspace(0.0, L, N + 1)
+    D = np.linalg.norm(pb - pa)
+    flip = pb[2] < pa[2]
+    lo, hi = (pb, pa) if flip else (pa, pb)
+    dh = hi[:2] - lo[:2]
+    X = float(np.hypot(*dh))
+    H = float(hi[2] - lo[2])
+    if abs(w) * L < 1e-6 * EA or L <= D * (1 + 1e-9) or X < 1e-6 * L:
+        return pa + np.outer(s / L, pb - pa), 0.0
+    sign = 1.0 if w > 0 else -1.0
+    e = np.append(dh / X, 0.0)
+    Hs = sign * H  # height in the frame where the line sags downwards
+
+    def place(x, z):
+        pts = lo + np.outer(x, e) + np.outer(sign * z, [0, 0, 1.0])
+        return pts[::-1] if flip else pts
+
+    on_bed = w > 0 and seabed_z is not None and lo[2] <= seabed_z + 1e-6 and Hs > 0
+    if on_bed and L - X > 0:
+        # touchdown: Ls suspended with a horizontal tangent at its foot
+        def g(Ls):
+            a = (Ls**2 - Hs**2) / (2 * Hs)
+            return Ls - (L - X) - a * math.asinh(Ls / a)
+
+        a_lo, a_hi = Hs * (1 + 1e-12), L
+        if g(a_hi) * g(a_lo) < 0:
+            s_lo = g(a_lo) < 0
+            for _ in range(200):
+                mid = 0.5 * (a_lo + a_hi)
+                a_lo, a_hi = (mid, a_hi) if (g(mid) < 0) == s_lo else (a_lo, mid)
+            Ls = 0.5 * (a_lo + a_hi)
+            Lb = L - Ls
+            a = (Ls**2 - Hs**2) / (2 * Hs)
+            sp = np.maximum(s - Lb, 0.0)
+            x = np.minimum(s, Lb) + a * np.arcsinh(sp / a)
+            z = a * (np.cosh(np.maximum(x - Lb, 0.0) / a) - 1.0)
+            return place(x, z), abs(w) * (a + Hs)
+    # fully suspended: sqrt(L^2 - H^2) = 2 a sinh(X / (2 a))
+    target = math.sqrt(max(L**2 - Hs**2, 1e-300))
+    lo_a, hi_a = 1e-6 * X, 1e9 * X
+    for _ in range(300):
+        mid = math.sqrt(lo_a * hi_a)
+        if 2 * mid * math.sinh(min(X / (2 * mid), 700.0)) > target:
+            lo_a = mid
+        else:
+            hi_a = mid
+    a = math.sqrt(lo_a * hi_a)
+    x0 = X / 2 - a * math.asinh(Hs / (2 * a * math.sinh(X / (2 * a))))
+    s0 = math.sinh(-x0 / a)
+    x = x0 + a * np.arcsinh(s / a + s0)
+    z = a * (np.cosh((x - x0) / a) - math.cosh(-x0 / a))
+    return place(x, z), abs(w) * a * math.cosh((X - x0) / a)
+
+
+def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
+    """A state at rest: every line a catenary between its points at time `t0`
+    (free points at their given positions), lying on the seabed of a `Seabed`
+    effect where it reaches it, drawn with the length stretched by the
+    catenary's largest tension. The starting point of `equilibrium`.
+
+    **Returns:** state `(n, 6)`."""
+    from .._environment import Environment
+    from .effects import Gravity, Seabed
+
+    env = Environment() if env is None else env
+    top = model.topology
+    hp = np.asarray(model.held_kinematics(jnp.asarray(t0, jnp.float64))[0])
+    pos = np.zeros((top.n_state, 3))
+    pts = []
+    for i, p in enumerate(model.points):
+        if isinstance(p, FreePoint):
+            pts.append(np.asarray(p.position))
+        else:
+            pts.append(hp[top.held.index(i)])
+    for i, r in zip(top.free, top.free_rows):
+        pos[r] = pts[i]
+    bed = [e for e in effects if isinstance(e, Seabed)]
+    seabed_z = -float(bed[0].depth) if bed else None
+    gravity = any(isinstance(e, Gravity) for e in effects)
+    g, rho = float(env.g), float(env.rho_water)
+    L = np.asarray(model.unstretched_lengths(jnp.asarray(t0, jnp.float64))[0])
+    for k, ((a, b), N) in enumerate(zip(model.attach, model.segments)):
+        d = float(model.d[k])
+        w = (float(model.w[k]) - rho * 0.25 * math.pi * d**2) * g if gravity else 0.0
+        EA = float(model.EA[k])
+        _, T = _catenary(pts[a], pts[b], float(L[k]), w, N, seabed_z, EA)
+        # the stretched line: the catenary of the length under that tension
+        stretched = float(L[k]) * (1.0 + max(T, 0.0) / EA)
+        shape, _ = _catenary(pts[a], pts[b], stretched, w, N, seabed_z, EA)
+        rows = top.body[model.line_nodes(k)[1:-1]]
+        pos[rows] = shape[1:-1]
+    return jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+
+
+def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
+    y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
+    st = model._state(t0, y, effects, env)
+    f = st.body_force[: model.topology.n_state]
+    return jnp.where(solve_rows[:, None], f, 0.0)
+
+
+def _ptc(x0, model, effects, env, t0, solve_rows, max_iter, tol, ftol):
+    """Pseudo-transient continuation to a zero of the net forces: implicit Euler
+    steps of x' = F(x) with a step that grows as the residual falls (a Newton
+    iteration once it is large). Returns (x, residual norm, iterations)."""
+
+    def resid(xf):
+        return _equilibrium_residual(
+            xf.reshape(x0.shape), model, effects, env, t0, solve_rows
+        ).reshape(-1)
+
+    mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
+
+    def body(c):
+        x, r, dt, it, _ = c
+        J = jax.jacfwd(resid)(x)
+        A = jnp.diag(mask / dt + (1 - mask)) - J * mask[:, None]
+        dx = jnp.linalg.solve(A, r) * mask
+        xn = x + dx
+        rn = resid(xn)
+        nr, nrn = jnp.linalg.norm(r), jnp.linalg.norm(rn)
+        ok = jnp.isfinite(nrn) & (nrn < 2.0 * nr + 1e-300)
+        grow = jnp.clip(nr / jnp.maximum(nrn, 1e-300), 0.1, 10.0)
+        dt_new = jnp.minimum(jnp.where(ok, dt * grow, dt * 0.1), 1 / _MIN_STIFFNESS)
+        step = jnp.max(jnp.abs(dx))
+        return (
+            jnp.where(ok, xn, x),
+            jnp.where(ok, rn, r),
+            dt_new,
+            it + 1,
+            jnp.where(ok, step, jnp.inf),
+        )
+
+    def cond(c):
+        _, r, _, it, step = c
+        return (it < max_iter) & (step > tol) & (jnp.linalg.norm(r) > ftol)
+
+    x0f = x0.reshape(-1)
+    r0 = resid(x0f)
+    init = (x0f, r0, jnp.asarray(1e-6), jnp.asarray(0), jnp.asarray(jnp.inf))
+    x, r, _, it, _ = jax.lax.while_loop(cond, body, init)
+    return x.reshape(x0.shape), jnp.linalg.norm(r), it
+
+
+# The pseudo-time term 1/dt never falls below this, N/m: a slack, weightless
+# line has no stiffness at all, and its nodes then stay where they are.
+_MIN_STIFFNESS = 1e-4
+
+
+def _newton_step(x, model, effects, env, t0, solve_rows):
+    """The converged `x` with the derivative of one (regularised) Newton step in
+    the parameters: the implicit-function derivative of the equilibrium."""
+    frozen = jax.lax.stop_gradient((model, effects, env))
+
+    def resid(xf, m, e, v):
+        return _equilibrium_residual(
+            xf.reshape(x.shape), m, e, v, t0, solve_rows
+        ).reshape(-1)
+
+    J = jax.jacfwd(resid)(x.reshape(-1), *frozen)
+    mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
+    A = jnp.diag(mask * _MIN_STIFFNESS + (1 - mask)) - J * mask[:, None]
+    r = resid(x.reshape(-1), model, effects, env)
+    dx = jnp.linalg.solve(A, r).reshape(x.shape)
+    # The primal stays the converged x (the step would only amplify the residual
+    # along the directions a slack line leaves free); the tangent is the step's.
+    return x + (dx - jax.lax.stop_gradient(dx))
+
+
+@eqx.filter_jit
+def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
+    frozen = jax.lax.stop_gradient((model, effects, env))
+    # Forces below 1e-9 of the total weight in water count as balanced.
+    m, _, v = frozen
+    area = 0.25 * jnp.pi * m.d**2
+    weight = jnp.sum(jnp.abs(m.w - v.rho_water * area) * m.L)
+    fm, fv, _, _ = m._free_params()
+    weight = v.g * (weight + jnp.sum(jnp.abs(fm - v.rho_water * fv)))
+    ftol = 1e-9 * jnp.maximum(weight, 1.0)
+    x, res, it = _ptc(
+        jax.lax.stop_gradient(x0), *frozen, t0, solve_rows, max_iter, tol, ftol
+    )
+    x = _newton_step(jax.lax.stop_gradient(x), model, effects, env, t0, solve_rows)
+    return x, res, it, ftol
+
+
+def equilibrium(
+    model: LineNetwork,
+    effects=(),
+    env=None,
+    t0=0.0,
+    y0=None,
+    free_points: str = "hold",
+    max_iter: int = 500,
+    tol: float = 1e-9,
+):
+    """The static equilibrium of a network: zero net force on every node at rest.
+
+    Starts from `y0` (default: `initial_shape`) and runs pseudo-transient
+    continuation (implicit Euler steps of x' = F(x), the step growing to a Newton
+    step) with the dense Jacobian. The last step is a Newton step taken with the
+    live parameters, so the returned state carries the implicit-function
+    derivative dx/dtheta = -J^-1 dF/dtheta under `jax.grad` (the iteration itself
+    is not differentiated).
+
+    **Arguments:**
+
+    - `free_points`: `"hold"` (free points stay where they are, MoorDyn's initial
+      condition: the lines settle between them) or `"solve"` (they settle too).
+    - `max_iter`: iteration limit. `tol`: largest position update at convergence, m.
+
+    **Returns:** `(y, info)`: the state `(n, 6)` at rest and a dict with
+    `residual` (the norm of the net forces, N) and `iterations`. Raises
+    ValueError when the iteration does not converge.
+    """
+    from .._environment import Environment
+    from .._validate import check_choice
+
+    check_choice("free_points", free_points, ("hold", "solve"))
+    env = Environment() if env is None else env
+    effects = tuple(effects)
+    top = model.topology
+    solve_rows = np.ones(top.n_state, bool)
+    if free_points == "hold":
+        solve_rows[top.free_rows] = False
+    solve_rows = jnp.asarray(solve_rows)
+    if y0 is None:
+        y0 = initial_shape(model, effects, env, t0)
+    x0 = jax.lax.stop_gradient(y0[:, :3])
+    t0 = jnp.asarray(t0, jnp.float64)
+    x, res, it, ftol = _solve_equilibrium(
+        x0, model, effects, env, t0, solve_rows, max_iter, tol
+    )
+    if not isinstance(res, jax.core.Tracer):
+        if not bool(jnp.isfinite(res)) or float(res) > 1e3 * ftol:
+            raise ValueError(
+                f"the static equilibrium did not converge: residual {float(res):.3g} N "
+                f"after {int(it)} iterations (max_iter = {max_iter})."
+            )
+    y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
+    return y, {"residual": res, "iterations": it}

@@ -1,0 +1,257 @@
+"""Mooring-line networks and MoorDyn decks, checked against MoorDyn's own validation
+cases (decks and reference data of MoorDyn 2.7.1, shipped in jaxstring/lines/cases):
+
+- deck parsing: the numbers of the decks, and a ValueError naming the line and
+  column for a malformed row and for an unsupported section;
+- the pendulum (MoorDyn's pendulum test): the rigid pendulum's period within
+  2.5 % and its amplitude within 1 %;
+- lifting (MoorDyn's lifting test): the unstretched length shrinks at 1 m/s for
+  10 s and the hanging point follows it;
+- WD0050 chain: static fairlead and anchor tensions against the reference
+  code's values (MoorDyn's test allows 10 %; here 2 %);
+- gradients of the static tensions (implicit-function derivative of the
+  equilibrium) and of a dynamic tension against central differences.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxstring as js
+from jaxstring import lines
+
+
+G = 9.80665  # MoorDyn's gravity, the decks' default
+
+
+@pytest.fixture(scope="module")
+def wd0050():
+    return lines.read_moordyn(lines.case_path("WD0050_Chain.txt"))
+
+
+# ---------------------------------------------------------------------------
+# Decks
+
+
+def test_parse_chain_deck():
+    deck = lines.parse_moordyn(lines.case_path("WD0050_Chain.txt"))
+    chain = deck.types["chain"]
+    assert chain == {"d": 0.252, "w": 390.0, "EA": 1.674e9, "BA": -1.0,
+                     "Cd": 1.37, "Ca": 1.0, "CdAx": 0.64, "CaAx": 0.0}  # fmt: skip
+    assert [p["kind"] for p in deck.points] == ["fixed", "coupled"]
+    assert deck.points[0]["position"] == [400.0, 0.0, -50.0]
+    assert deck.lines == [{"id": 1, "type": "chain", "a": 1, "b": 2, "L": 410.0,
+                           "segments": 41}]  # fmt: skip
+    o = deck.options
+    assert (o["depth"], o["kBot"], o["cBot"], o["friction"]) == (50, 1e5, 1e4, 0.5)
+    assert (o["g"], o["rho"]) == (G, 1025.0)  # MoorDyn's default g
+    assert deck.numerics["cfl"] == "0.1"
+    # three lines and six points of the OC3-Hywind deck
+    deck = lines.parse_moordyn(lines.case_path("lines.txt"))
+    assert len(deck.lines) == 3 and len(deck.points) == 6
+    assert deck.numerics["dtM"] == "0.002"
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "deck.txt"
+    path.write_text(text)
+    return str(path)
+
+
+def _deck_lines():
+    with open(lines.case_path("pendulum.txt")) as f:
+        return f.read().splitlines()
+
+
+def test_malformed_row_names_line_and_column(tmp_path):
+    rows = _deck_lines()
+    i = next(k for k, r in enumerate(rows) if r.startswith("main"))
+    rows[i] = rows[i].replace("1.0E9", "1.0E9x")
+    col = rows[i].index("1.0E9x") + 1
+    with pytest.raises(ValueError, match=rf"line {i + 1}, column {col}: .*EA"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
+    # a line attached to a point that does not exist
+    rows = _deck_lines()
+    j = next(k for k, r in enumerate(rows) if r.startswith("1     main"))
+    rows[j] = "1 main 1 7 100.5 20 -"
+    with pytest.raises(ValueError, match=rf"line {j + 1}, column 10: point 7"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
+
+
+def test_unsupported_section_and_option(tmp_path):
+    rows = _deck_lines()
+    k = next(i for i, r in enumerate(rows) if "LINES" in r)
+    rods = [
+        "---------------------- RODS ----------------------------",
+        "ID RodType Attachment Xa Ya Za Xb Yb Zb NumSegs RodOutputs",
+    ]
+    with pytest.raises(ValueError, match=rf"line {k + 1}, column 1: section 'RODS'"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows[:k] + rods + rows[k:])))
+    rows = _deck_lines()
+    k = next(i for i, r in enumerate(rows) if "WtrDpth" in r)
+    rows.insert(k, "1             WaterKin      wave kinematics")
+    with pytest.raises(ValueError, match=rf"line {k + 1}, column 1: option WaterKin"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
+
+
+def test_bad_point_type(tmp_path):
+    rows = _deck_lines()
+    k = next(i for i, r in enumerate(rows) if r.startswith("2     Free"))
+    rows[k] = rows[k].replace("Free", "Body1")
+    with pytest.raises(ValueError, match=rf"line {k + 1}, column 7: point type"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
+
+
+# ---------------------------------------------------------------------------
+# Static tensions
+
+
+def test_wd0050_static_tensions(wd0050):
+    """Reference code (MoorDyn's test): fairlead 991.6 kN, anchor 826.2 kN."""
+    ta, tb = lines.static_tensions(wd0050)[1]
+    assert abs(tb / 991.6e3 - 1) < 0.02
+    assert abs(ta / 826.2e3 - 1) < 0.02
+    # the chain lies on the seabed near the anchor: horizontal force balance
+    obs = wd0050.observables(wd0050.y0)
+    fa, fb = np.asarray(obs["end_force_a"][0]), np.asarray(obs["end_force_b"][0])
+    # seabed friction is zero at rest: the horizontal pulls balance
+    assert abs(fa[0] + fb[0]) < 1e-6 * abs(fb[0])
+    # vertical: the net weight in water of the chain, less what the seabed carries
+    nodes = np.asarray(obs["nodes"])
+    assert np.min(nodes[:, 2]) > -50.2  # seabed penetration ~ w/(kBot d) = 0.13 m
+
+
+def test_static_gradients(wd0050):
+    """d(static fairlead and anchor tension)/d(EA, kBot, w) through the
+    equilibrium's implicit-function derivative vs central differences."""
+    scene = wd0050
+
+    def tensions(p):
+        m = eqx.tree_at(lambda m: (m.EA, m.w), scene.model, (p[0:1], p[2:3]))
+        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[2], p[1])
+        eff = scene.effects[:2] + (bed,)
+        y, _ = lines.equilibrium(m, eff, scene.env, scene.t0, y0=scene.y0)
+        s = eqx.tree_at(lambda s: (s.model, s.effects, s.y0), scene, (m, eff, y))
+        t = lines.moordyn._rest_observables(s)
+        return jnp.stack([t["tension_a"][0], t["tension_b"][0]])
+
+    p0 = jnp.array([1.674e9, 1.0e5, 390.0])
+    J = jax.jacrev(tensions)(p0)
+    for i in range(3):
+        # steps of 1e-3: the solve stops at residuals of ~1e-3 N
+        h = 1e-3 * p0[i]
+        e = jnp.zeros(3).at[i].set(h)
+        fd = (tensions(p0 + e) - tensions(p0 - e)) / (2 * h)
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-4)
+    # heavier chain: higher tensions (about L_suspended * g per kg/m)
+    assert J[1, 2] > 100 * G
+
+
+# ---------------------------------------------------------------------------
+# Dynamics
+
+
+def _peaks(ts, x):
+    """Times and values of the local extrema of x (parabolic refinement)."""
+    out = []
+    for i in range(1, len(x) - 1):
+        if (x[i] - x[i - 1]) * (x[i + 1] - x[i]) < 0:
+            a, b, c = x[i - 1], x[i], x[i + 1]
+            den = a - 2 * b + c
+            d = 0.5 * (a - c) / den
+            h = ts[1] - ts[0]
+            out.append((ts[i] + d * h, b - 0.25 * (a - c) * d))
+    return np.array(out)
+
+
+def test_pendulum_period_and_amplitude():
+    """MoorDyn's pendulum test: the 1e5 kg point on a 100.5 m neutrally buoyant
+    line, released at rest from x = 10 m, swings with the rigid pendulum's
+    period 2 pi sqrt(l0/g) (within 2.5 %) and keeps its amplitude (within 1 %)."""
+    scene = lines.read_moordyn(lines.case_path("pendulum.txt"))
+    x0 = float(scene.model.points[1].position[0])
+    l0 = math.hypot(10.0, 100.0)
+    T = 2 * math.pi * math.sqrt(l0 / G)
+    scene = eqx.tree_at(lambda s: s.t1, scene, jnp.asarray(1.1 * T))
+    ts = np.linspace(0.0, 1.1 * T, 441)
+    traj = js.simulate(scene, "kvaerno5", rtol=1e-4, atol=1e-4, ts=ts)
+    assert traj.ok
+    x = np.asarray(traj.positions[:, -1, 0])
+    assert x[0] == pytest.approx(x0)
+    pk = _peaks(ts, x)
+    pk = pk[np.abs(pk[:, 1]) > 0.5 * x0]  # the swings, not the axial ripple
+    assert len(pk) == 2
+    np.testing.assert_allclose(pk[:, 0], [0.5 * T, T], atol=0.025 * T)
+    np.testing.assert_allclose(np.abs(pk[:, 1]), x0, rtol=0.01)
+    # Half a period between the zero crossings: the rigid pendulum's, lengthened
+    # by the finite amplitude (theta0^2/16), the line's inertia (a weightless rod
+    # of a third of its mass at the bob's radius) and its stretch under the
+    # bob's weight (l0 M g/EA), to 0.5 %.
+    i = np.nonzero(np.diff(np.sign(x)))[0]
+    tz = ts[i] - x[i] * (ts[i + 1] - ts[i]) / (x[i + 1] - x[i])
+    assert len(tz) == 2
+    m = scene.model
+    M, m_line = 1e5, float(m.w[0] * m.L[0])
+    l_eff = l0 * (1 + m_line / (3 * M)) + l0 * M * G / float(m.EA[0])
+    T_exact = 2 * math.pi * math.sqrt(l_eff / G) * (1 + (x0 / l0) ** 2 / 16)
+    assert 2 * (tz[1] - tz[0]) == pytest.approx(T_exact, rel=0.005)
+
+
+@pytest.mark.slow
+def test_lifting_follows_the_length():
+    """MoorDyn's lifting test: the line's unstretched length shrinks at 1 m/s for
+    10 s; the 1e3 kg point hangs at z = -L(t) within 0.5 m from t = 1 s on (it
+    starts 0.5 m below its slack line), and L(t) is exactly L0 - t."""
+    scene = lines.read_moordyn(lines.case_path("lifting.txt"), t1=10.0)
+    L0 = float(scene.model.L[0])
+    sched = js.PiecewiseLinear(jnp.array([0.0, 10.0]), jnp.array([L0, L0 - 10.0]))
+    scene = eqx.tree_at(
+        lambda s: s.model.lengths, scene, (sched,), is_leaf=lambda x: x is None
+    )
+    ts = np.linspace(0.0, 10.0, 101)
+    traj = js.simulate(scene, "kvaerno5", rtol=1e-4, atol=1e-4, ts=ts)
+    assert traj.ok
+    L = np.asarray(traj.lengths[:, 0])
+    np.testing.assert_allclose(L, L0 - ts, atol=1e-9)
+    z = np.asarray(traj.positions[:, -1, 2])
+    late = ts >= 1.0
+    assert np.max(np.abs(z + L)[late]) < 0.5
+    # at the end it hangs still on a line stretched by its weight: 1e3 g L/EA
+    assert abs(z[-1] + L[-1]) < 0.05
+
+
+@pytest.mark.slow
+def test_wd0050_dynamic_tension_gradient():
+    """d(fairlead tension at t = -9 s)/d(Cd, EA, kBot) of the WD0050 chain
+    heaved by the ZZP1_A1 motion vs central differences, from the static state,
+    on a fixed-step trapezoidal solve (both differentiate the same discrete map;
+    forward mode through the stage Newton iterations)."""
+    scene = lines.read_moordyn(
+        lines.case_path("WD0050_Chain.txt"),
+        motion=lines.case_path("QuasiStatic/ZZP1_A1.txt"),
+        t1=-9.0,
+    )
+    ts = jnp.array([-10.0, -9.0])
+
+    def tension(p):
+        m = eqx.tree_at(lambda m: (m.Cd, m.EA), scene.model, (p[0:1], p[1:2]))
+        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[2], p[2])
+        s = eqx.tree_at(
+            lambda s: (s.model, s.effects), scene, (m, scene.effects[:2] + (bed,))
+        )
+        tr = js.simulate(
+            s, "trapezoid", dt0=0.005, ts=ts, rtol=1e-10, atol=1e-10, adjoint="forward"
+        )
+        return tr.obs["tension_b"][-1, 0]
+
+    p0 = jnp.array([1.37, 1.674e9, 1e5])
+    g = jax.jacfwd(tension)(p0)
+    for i in range(3):
+        h = 1e-5 * p0[i]
+        e = jnp.zeros(3).at[i].set(h)
+        fd = (tension(p0 + e) - tension(p0 - e)) / (2 * h)
+        assert float(g[i]) == pytest.approx(float(fd), rel=1e-5)
