@@ -556,12 +556,16 @@ def preset_study(quick=False, systems=None, out_name=""):
 
 
 def _plot(rows, forms, EAs, name, targets=TARGETS):
-    """Error against CPU time (min over rounds), one curve per code, targets dotted."""
-    fig, axes = common.new_figure(len(EAs), len(forms), w=4.4, h=3.4)
+    """Error against CPU time (min over rounds), one curve per code (one colour per
+    code in every panel), targets dotted."""
+    fig, axes = common.new_figure(len(EAs), len(forms), w=4.6, h=4.0)
+    colour = {label: f"C{c % 10}" for c, label in enumerate(
+        dict.fromkeys(r["code"] for r in rows))}  # fmt: skip
+    handles = {}
     for (i, form), (j, EA) in itertools.product(enumerate(forms), enumerate(EAs)):
         ax = axes[i][j]
         sel = [r for r in rows if (r["formulation"], r["EA"]) == (form, EA)]
-        for c, label in enumerate(dict.fromkeys(r["code"] for r in sel)):
+        for label in dict.fromkeys(r["code"] for r in sel):
             pts = sorted(
                 (r["cpu_s"], r["err_m"])
                 for r in sel
@@ -569,13 +573,16 @@ def _plot(rows, forms, EAs, name, targets=TARGETS):
             )
             if pts:
                 style = "-" if label.startswith(("jaxstring", CVODE)) else ":"
-                ax.loglog(*zip(*pts), style, marker="o", ms=3, color=f"C{c % 10}",
-                          label=label)  # fmt: skip
+                (handles[label],) = ax.loglog(
+                    *zip(*pts), style, marker="o", ms=3, color=colour[label]
+                )
         for t in targets:
             ax.axhline(t, color="0.6", lw=0.6, ls=":")
         ax.set_title(f"{LABELS[form]}, EA = {EA:g} N", fontsize=9)
         ax.set(xlabel="CPU time (s), min over rounds", ylabel="end-mass error (m)")
-    axes[0][0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.legend(handles.values(), handles.keys(), loc="upper center", fontsize=7,
+               ncol=3, bbox_to_anchor=(0.5, 0.0))  # fmt: skip
     common.savefig(fig, name)
 
 
