@@ -16,8 +16,8 @@ tight solve does not complete, see the notes); the smoothing table measures that
 stand-in and each eps_s against it at k = 10.
 
 Output: experiments/results/slack_snap.{md,csv,png}, slack_snap_smoothing.{md,csv},
-slack_snap_steps.csv. Runtime: ~25 min on a shared 2-core machine (--quick: k = 10,
-~3 min).
+slack_snap_steps.csv (and slack_snap_k160.{md,csv} with --k_large 160). Runtime:
+27 min with --k_large 160 on a shared 2-core machine at load 15-20 (--quick: k = 10).
 """
 
 import os
