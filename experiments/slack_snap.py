@@ -16,8 +16,8 @@ tight solve does not complete, see the notes); the smoothing table measures that
 stand-in and each eps_s against it at k = 10.
 
 Output: experiments/results/slack_snap.{md,csv,png}, slack_snap_smoothing.{md,csv},
-slack_snap_steps.csv. Runtime: ~25 min on a shared 2-core machine (--quick: k = 10,
-~3 min).
+slack_snap_steps.csv (and slack_snap_k160.{md,csv} with --k_large 160). Runtime:
+27 min with --k_large 160 on a shared 2-core machine at load 15-20 (--quick: k = 10).
 """
 
 import os
@@ -321,23 +321,39 @@ def smoothing_table(smoothing, k=10):
     return rows
 
 
+STEP_HEADER = (
+    "formulation,solver,law,t_from_s,accepted_steps,h_min_s,h_median_s,state_changes"
+)
+
+
+def step_windows(label, ts, h, changes, width=0.01):
+    """The per-step log in windows of `width` s: accepted steps, smallest and
+    median step, and changes of state (taut/slack) of the tension points."""
+    out = []
+    for a in np.arange(0.0, T1, width):
+        m = (ts > a) & (ts <= a + width)
+        if m.any():
+            out.append(
+                f"{label},{a:.3f},{int(m.sum())},{h[m].min():.3g},"
+                f"{np.median(h[m]):.3g},{int(changes[m].sum())}"
+            )
+    return out
+
+
 def step_figure(smoothing, k):
     """Step size over time, sharp (before) and smoothed (after), EA = 1e8 snap, in
-    each formulation with its preset solver; the per-step log in
-    slack_snap_steps.csv."""
-    from _common import new_figure, results_dir, savefig
+    each formulation with its preset solver; the per-step log, in 10 ms windows,
+    in slack_snap_steps.csv."""
+    from _common import new_figure, results_dir, savefig, stamp_line
 
     fig, axes = new_figure(ncols=3, w=4.6, h=3.6)
-    lines = ["formulation,solver,law,t_s,h_s,changes"]
+    lines = [f"# {stamp_line()}", STEP_HEADER]
     for ax, f in zip(axes[0], FORMULATIONS):
         solver = SOLVERS[f][0]
         for law, eps_s, color in (("sharp", 0.0, "0.6"), ("smooth", smoothing, "C0")):
             ts, h, ch = step_log(f, "snap", k, eps_s, solver)
             ax.semilogy(ts, h, ".", ms=1.5, color=color, label=f"{law} ({len(ts)})")
-            lines += [
-                f"{f},{solver},{law},{t:.9g},{hh:.4g},{c}"
-                for t, hh, c in zip(ts, h, ch)
-            ]
+            lines += step_windows(f"{f},{solver},{law}", ts, h, ch)
         ax.set_title(f"{f}, {solver}, k = {k}")
         ax.set_xlabel("t (s)")
         ax.set_xlim(0, T1)
