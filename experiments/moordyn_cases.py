@@ -57,7 +57,9 @@ DT = 0.1  # coupling and output step, s (the motion table's)
 
 
 def _deck_copy(workdir, name, cfl=None):
-    """A copy of a deck in `workdir`, with its CFL option replaced."""
+    """A copy of a deck in `workdir` (MoorDyn writes its .out and .log files
+    beside the deck), with its CFL option replaced when `cfl` is given, and the
+    deck's `.ic` snapshot beside it."""
     src = lines.case_path(name)
     dst = os.path.join(workdir, f"{os.path.splitext(name)[0]}_cfl{cfl}.txt")
     text = open(src).read()
@@ -220,7 +222,7 @@ def chain_case(case, rows, series, quick, repeats, workdir):
         m[0]["speedup_js_cpu"] = m[0]["cpu_s"] / best[2]["cpu_s"]
 
 
-def pendulum_case(rows, repeats):
+def pendulum_case(rows, repeats, workdir):
     """Pendulum: period, amplitude, and the two codes' x(t) against each other."""
     import moordyn
 
@@ -229,9 +231,10 @@ def pendulum_case(rows, repeats):
     t1 = 2.0 * T
     ts = np.arange(0.0, t1, 0.05)
     path = lines.case_path("pendulum.txt")
+    md_path = _deck_copy(workdir, "pendulum.txt")  # MoorDyn writes beside it
     with common.quiet_fd():
         t0 = time.perf_counter()
-        system = moordyn.Create(path)
+        system = moordyn.Create(md_path)
         moordyn.Init(system, [], [])
         init_s = time.perf_counter() - t0
         pt = moordyn.GetPoint(system, 2)
@@ -275,14 +278,14 @@ def pendulum_case(rows, repeats):
     rows[-2]["speedup_js_cpu"] = md_cpu / cpu
 
 
-def lifting_case(rows, repeats):
+def lifting_case(rows, repeats, workdir):
     import equinox as eqx
     import moordyn
 
     path = lines.case_path("lifting.txt")
     ts = np.arange(0.0, 10.0 + 1e-9, 0.1)
     with common.quiet_fd():
-        system = moordyn.Create(path)
+        system = moordyn.Create(_deck_copy(workdir, "lifting.txt"))
         moordyn.Init(system, [], [])
         line = moordyn.GetLine(system, 1)
         pt = moordyn.GetPoint(system, 2)
@@ -323,7 +326,7 @@ def hywind_motion(t):
     return np.stack([5.0 * ramp * np.sin(w * t), 0 * t, 2.0 * ramp * np.sin(w * t)], 1)
 
 
-def hywind_case(rows, series, quick, repeats):
+def hywind_case(rows, series, quick, repeats, workdir):
     """lines.txt: three OC3-Hywind lines; the fairleads surge and heave."""
     import moordyn
 
@@ -335,7 +338,7 @@ def hywind_case(rows, series, quick, repeats):
     fair0 = np.array([p["position"] for p in deck.points if p["kind"] == "coupled"])
     with common.quiet_fd():
         t0 = time.perf_counter()
-        system = moordyn.Create(path)
+        system = moordyn.Create(_deck_copy(workdir, "lines.txt"))
         moordyn.Init(system, list(fair0.reshape(-1)), [0.0] * 9)
         init_s = time.perf_counter() - t0
         lns = [moordyn.GetLine(system, k) for k in (1, 2, 3)]
@@ -548,9 +551,9 @@ def main(quick=False, repeats=None, gradients=False, identify=False):
         for case in ("WD0050", "WD0200"):
             chain_case(case, rows, series, quick, repeats, workdir)
         if not quick:
-            pendulum_case(rows, repeats)
-            lifting_case(rows, repeats)
-        hywind_case(rows, series, quick, repeats)
+            pendulum_case(rows, repeats, workdir)
+            lifting_case(rows, repeats, workdir)
+        hywind_case(rows, series, quick, repeats, workdir)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     tag = "_quick" if quick else ""

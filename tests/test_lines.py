@@ -115,12 +115,10 @@ def test_wd0050_static_tensions(wd0050):
     ta, tb = lines.static_tensions(wd0050)[1]
     assert abs(tb / 991.6e3 - 1) < 0.02
     assert abs(ta / 826.2e3 - 1) < 0.02
-    # the chain lies on the seabed near the anchor: horizontal force balance
     obs = wd0050.observables(wd0050.y0)
     fa, fb = np.asarray(obs["end_force_a"][0]), np.asarray(obs["end_force_b"][0])
-    # seabed friction is zero at rest: the horizontal pulls balance
+    # seabed friction is zero at rest: the two ends' horizontal pulls balance
     assert abs(fa[0] + fb[0]) < 1e-6 * abs(fb[0])
-    # vertical: the net weight in water of the chain, less what the seabed carries
     nodes = np.asarray(obs["nodes"])
     assert np.min(nodes[:, 2]) > -50.2  # seabed penetration ~ w/(kBot d) = 0.13 m
 
