@@ -95,38 +95,51 @@ def usable(args) -> bool:
     return True
 
 
+_LOADED = {}  # key -> the compiled call of a saved program, in this process
+_REFUSED = set()  # keys whose programs cannot be exported (host callbacks)
+
+
 def call(fn, *args):
     """`fn(*args)` through a saved program, where `fn` returns a pytree of arrays
-    in dicts, lists and tuples; falls back to tracing `fn` when the arguments have
-    no stable key or the saved program cannot be used."""
+    in dicts, lists and tuples; None where no program can be saved (no stable key,
+    or the traced function holds host callbacks): the caller then runs `fn` its
+    usual way."""
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jtu.tree_flatten(dynamic)
     key = _key(static, treedef, leaves)
-    jit_opts = dict(compiler_options=CPU_COMPILER_OPTIONS)
+    if key is None or key in _REFUSED:
+        return None
+    if key not in _LOADED:
+        exported = _load_or_export(fn, key, static, treedef, leaves)
+        if exported is None:
+            _REFUSED.add(key)
+            return None
+        _LOADED[key] = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
+    return _LOADED[key](*leaves)
+
+
+def _load_or_export(fn, key, static, treedef, leaves):
+    path = pathlib.Path(_FOLDER["path"]) / f"{key}.program"
+    if path.exists():
+        try:
+            return pickle.loads(path.read_bytes())
+        except Exception:  # unreadable or written by another version: trace again
+            pass
 
     def flat(*xs):
         return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
 
-    if key is None:
-        return jax.jit(flat, **jit_opts)(*leaves)
-    path = pathlib.Path(_FOLDER["path"]) / f"{key}.program"
-    exported = None
-    if path.exists():
-        try:
-            exported = pickle.loads(path.read_bytes())
-        except Exception:  # unreadable or written by another version: trace again
-            exported = None
-    if exported is None:
-        avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
-        try:
-            exported = jax.export.export(jax.jit(flat, **jit_opts))(*avals)
-        except ValueError:  # e.g. host callbacks, which an exported program refuses
-            return jax.jit(flat, **jit_opts)(*leaves)
-        try:
-            data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_bytes(data)
-            os.replace(tmp, path)
-        except (OSError, pickle.PicklingError, TypeError, AttributeError):
-            pass  # not saved: this process still runs the program it traced
-    return jax.jit(exported.call, **jit_opts)(*leaves)
+    avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    try:
+        jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
+        exported = jax.export.export(jitted)(*avals)
+    except (NotImplementedError, ValueError):  # host callbacks cannot be exported
+        return None
+    try:
+        data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except (OSError, pickle.PicklingError, TypeError, AttributeError):
+        pass  # not saved: this process still runs the program it traced
+    return exported

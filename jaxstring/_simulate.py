@@ -188,8 +188,11 @@ def _solve_fields(scene, config, ts):
 
 
 def _solve_saved(scene, config, ts) -> Trajectory:
-    """`_solve` through a saved program (see `jaxstring._programs`)."""
+    """`_solve` through a saved program where one can be saved (see
+    `jaxstring._programs`)."""
     fields = _programs.call(_solve_fields, scene, config, ts)
+    if fields is None:
+        return _solve(scene, config, ts)
     return Trajectory(**(fields | {"result": result_from_code(fields["result"])}))
 
 

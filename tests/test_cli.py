@@ -94,8 +94,10 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
     try:
         first = _programs.call(fn, x, jnp.asarray(2.0))
         jax.clear_caches()
+        _programs._LOADED.clear()  # as in a new process: read the saved file
         second = _programs.call(fn, x, jnp.asarray(2.0))
         other = _programs.call(fn, x, jnp.asarray(3.0))  # new values, same program
+        bad = _programs.call(lambda v: {"y": jax.pure_callback(lambda a: a, v, v)}, x)
     finally:
         _programs.set_program_folder(None)
     assert len(traces) == 1
@@ -106,3 +108,4 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
     )
     assert jnp.allclose(other["y"], 1.5 * expected, rtol=1e-15, atol=1e-15)
     assert int(second["n"]) == 4  # 0.5, 1, 1.5, 2
+    assert bad is None  # host callbacks: no program, the caller runs it its own way
