@@ -13,8 +13,9 @@ implicit_euler: adaptive at rtol = atol = 1e-6; theta: trapezoid, fixed step
 dt = 0.005 s, the paper's) x k = 10, 40, 160.
 
 Tether: the folded cable (`tether_fold`, interior angle 90-170 deg) with exact,
-ACEAM and LMS tensions; pay-out and haul-in at 2 m/s (`tether_winch`) in no
-current, the paper's 1 m/s and a strong 3 m/s current. Tandem: fishtailing over
+ACEAM and LMS tensions (dopri5, rodas5p, bdf); pay-out and haul-in at 2 m/s
+(`tether_winch`, N = 41, 70 s; dopri5, bdf) in no current, the paper's 1 m/s and a
+strong 3 m/s current; capped at 20000 steps. Tandem: fishtailing over
 6 hours from 2.5 and 40 deg (the hawser goes slack and snaps taut), a 25 m/s wind
 from 180 deg with no control, and law B's compensator in that wind and with its
 surge force limited to 0.3 and 0.1 MN (saturated for the whole run).
