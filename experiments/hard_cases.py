@@ -46,7 +46,8 @@ import os
 
 # Equinox's runtime checks compile to host callbacks, which JAX's persistent cache
 # does not store; as NaN they do not (jaxstring's command line does the same).
-os.environ.setdefault("EQX_ON_ERROR", "nan")
+if __name__ == "__main__":  # as a script only: importing it changes nothing
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import csv
 import math

@@ -24,7 +24,8 @@ import os
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("EQX_ON_ERROR", "nan")
+if __name__ == "__main__":  # as a script only: importing it changes nothing
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import math
 import sys
