@@ -18,15 +18,12 @@ Run: ``python experiments/sweep_race.py [--quick]``.
 """
 
 import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (
-        os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
-    ).strip()
-
 import time
+
+
+# Imported first: it gives JAX two host CPU devices (the machine's two cores) and
+# one BLAS thread before JAX is imported, as for sweep_speed's own runs.
+from sweep_speed import end_mass  # isort: skip
 
 import _common as common
 import numpy as np
@@ -35,11 +32,6 @@ from race_strongest import _clock
 
 import jaxstring as js
 from jaxstring._sweep import sweep
-
-
-def _end_mass(traj, scene):
-    del scene
-    return traj.obs["positions"][:, -1, :]
 
 
 def _cvode_loop(k, alphas, ts, tol):
@@ -67,7 +59,7 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode):
     base = js.scenes.string_pendulum(k=k, EA=1e6, t1=2.0)
 
     def run_sweep(tol):
-        res = sweep(base, {"alpha": alphas}, _end_mass, solver=solver, rtol=tol,
+        res = sweep(base, {"alpha": alphas}, end_mass, solver=solver, rtol=tol,
                     atol=tol, ts=ts, mode=mode, batch_size=group, order="sort",
                     devices="auto", max_steps=common.MAX_STEPS)  # fmt: skip
         return np.asarray(res.out), bool(np.all(res.ok))
