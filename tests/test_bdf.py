@@ -156,16 +156,21 @@ def test_steps_comparable_to_scipy_bdf():
     jac = jax.jit(
         jax.jacfwd(lambda y, t: scene.vector_field(t, y.reshape(shape)).reshape(-1))
     )
-    ref = solve_ivp(
-        lambda t, y: np.asarray(f(t, y)),
-        (0.0, 1.0),
-        np.asarray(scene.y0).reshape(-1),
-        method="BDF",
-        rtol=1e-6,
-        atol=1e-6,
-        jac=lambda t, y: np.asarray(jac(y, t)),
-    )
-    assert ref.success
+    # scipy's BDF can form an invalid value in the slot of its difference table one
+    # above the current order (used only to weigh raising the order); whether that
+    # warning fires depends on the CPU's rounding, so it is silenced for the
+    # reference alone. The result is still checked to be finite and successful.
+    with np.errstate(invalid="ignore", over="ignore"):
+        ref = solve_ivp(
+            lambda t, y: np.asarray(f(t, y)),
+            (0.0, 1.0),
+            np.asarray(scene.y0).reshape(-1),
+            method="BDF",
+            rtol=1e-6,
+            atol=1e-6,
+            jac=lambda t, y: np.asarray(jac(y, t)),
+        )
+    assert ref.success and np.all(np.isfinite(ref.y[:, -1]))
     n_scipy = len(ref.t) - 1
     traj = js.simulate(scene, "bdf", rtol=1e-6, atol=1e-6, ts=ts)
     assert traj.ok
