@@ -16,6 +16,11 @@ Run: ``python experiments/step_cost.py [--quick]``.
 """
 
 import argparse
+import glob
+import gzip
+import json
+import os
+import tempfile
 import time
 
 import diffrax as dfx
@@ -40,6 +45,12 @@ TIMES = (
     "solve_us",
     "bdf_step_us",
     "simulate_step_us",
+)
+
+KERNEL_COLUMNS = tuple(
+    f"{solver}_{col}"
+    for solver in ("bdf", "kvaerno5")
+    for col in ("kernels_per_step", "us_per_attempt", "ns_per_kernel")
 )
 
 
@@ -99,7 +110,7 @@ def pieces(k, n):
         "solve_us": loop_us(lambda r, FF: 0.5 * (FF.solve(r) + r), y, F, n),
     }
     # One whole BDF step, repeated from the same (t0, y0) with the state carried.
-    solver = BDF(rtol=1e-7, atol=1e-7)
+    solver = BDF(rtol=1e-7, atol=1e-7, reuse_jacobian=False)
     term = dfx.ODETerm(scene_vector_field)
     h = 1e-4
     st0 = solver.init(term, 0.0, h, sc.y0, sc)
@@ -147,6 +158,47 @@ def simulate_per_step(k, t1):
     return best["model"] / n * 1e6, best["probed"] / n * 1e6, n
 
 
+def _kernel_events(trace_dir):
+    """Executed XLA kernels in a perfetto trace: one complete event per thunk run,
+    less the executor's and JAX's own wrapper events."""
+    path = glob.glob(os.path.join(trace_dir, "**", "*.trace.json.gz"), recursive=True)
+    with gzip.open(path[0]) as f:
+        events = json.load(f)["traceEvents"]
+    wrappers = ("ThunkExecutor", "PjitFunction", "ExecuteHelper", "$", "while", "cond")
+    return sum(
+        1
+        for e in events
+        if e.get("ph") == "X" and not str(e.get("name", "")).startswith(wrappers)
+    )
+
+
+def kernels_per_step(k, t1, solver):
+    """XLA kernels executed per step attempt of a short release (displacement,
+    EA = 1e6, rtol = atol = 1e-7), counted in a profiler trace, and the wall time
+    per attempt of the same run without the profiler (best of 3): their ratio is
+    the mean cost of one kernel, launch included."""
+    sc = jaxstring.scenes.string_pendulum(
+        formulation="displacement", k=k, EA=1e6, t1=t1
+    )
+    ts = np.linspace(0.0, t1, 5)
+    run = lambda: jax.block_until_ready(
+        jaxstring.simulate(sc, solver, rtol=1e-7, atol=1e-7, ts=ts, max_steps=10**6)
+    )
+    run()
+    best = np.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        traj = run()
+        best = min(best, time.perf_counter() - t)
+    attempts = int(traj.stats["num_steps"])
+    with tempfile.TemporaryDirectory() as d:
+        with jax.profiler.trace(d, create_perfetto_trace=True):
+            run()
+        n = _kernel_events(d)
+    us = best / attempts * 1e6
+    return n / attempts, us, us * 1e3 / (n / attempts)
+
+
 def main(quick=False):
     set_quick(quick)
     ks = (40, 160) if quick else (40, 160, 640, 1280)
@@ -165,6 +217,13 @@ def main(quick=False):
             row["simulate_step_us"] / row["simulate_probed_step_us"]
         )
         row["simulate_t1"] = t1
+        # a shorter span for the traces (a trace holds at most ~1M events)
+        for solver in ("bdf", "kvaerno5"):
+            (
+                row[f"{solver}_kernels_per_step"],
+                row[f"{solver}_us_per_attempt"],
+                row[f"{solver}_ns_per_kernel"],
+            ) = kernels_per_step(k, t1 / 5, solver)
         rows.append(row)
         print(
             f"k={k}: rhs {row['rhs_us']:.1f} jac {row['jacobian_us']:.1f} "
@@ -191,6 +250,15 @@ def main(quick=False):
         "arithmetic on the difference array D (8 rows of the state) and the "
         "selects that carry the state.",
     ]
+    notes.append(
+        "*_kernels_per_step: XLA kernels (thunks) executed per step attempt, counted "
+        "in a profiler trace of a release over simulate_t1 / 5 s (rtol = atol = "
+        "1e-7), Newton iterations and rejected attempts included; *_us_per_attempt: "
+        "wall time per attempt of the same run without the profiler (best of 3); "
+        "*_ns_per_kernel: their ratio, the mean cost of one kernel with its launch. "
+        "At small k a step is hundreds of kernels of a few hundred states each, and "
+        "its time is their count times a launch-bound cost per kernel."
+    )
     for col in TIMES:
         notes.append(
             f"{col}: k = {r1['k']} / k = {r0['k']}: {r1[col] / r0[col]:.1f}x "
@@ -209,6 +277,7 @@ def main(quick=False):
             "model_over_probed",
             "simulate_steps",
             "simulate_t1",
+            *KERNEL_COLUMNS,
         ],
         "Cost of one BDF step and its pieces vs k (displacement, EA = 1e6)",
         notes,

@@ -165,5 +165,8 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
     if solver == "dopri5":
         return dfx.Dopri5()
     if solver == "bdf":
-        return BDF(rtol=newton_rtol, atol=newton_atol)
+        # A stored Jacobian serves later steps only where the stiff force does not
+        # turn with the state: the same declaration as Kvaerno's per-stage one.
+        reuse = not scene.model.stage_jacobians(scene.effects)
+        return BDF(rtol=newton_rtol, atol=newton_atol, reuse_jacobian=reuse)
     raise AssertionError(solver)
