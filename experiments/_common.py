@@ -466,6 +466,18 @@ def quiet_fd():
             os.close(fd)
 
 
+def moordyn_start(path):
+    """Create a MoorDyn system from the input file `path` and initialise it (its
+    initial-condition solve; no coupled bodies): (system, seconds taken). Call it
+    inside `quiet_fd()` to silence MoorDyn's console output."""
+    import moordyn
+
+    t0 = time.perf_counter()
+    system = moordyn.Create(path)
+    moordyn.Init(system, [], [])
+    return system, time.perf_counter() - t0
+
+
 def timed_wall_cpu(fn, repeats):
     """Call `fn()` once (compile) and `repeats` times more; return (last result,
     compile s, median wall s, median CPU s of this process, all threads). The CPU
