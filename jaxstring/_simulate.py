@@ -208,6 +208,17 @@ def _solve_saved(scene, config, ts) -> Trajectory:
     return Trajectory(**(fields | {"result": result_from_code(fields["result"])}))
 
 
+def _save_times(scene: Scene, ts, n_save):
+    """The save times of `simulate` and `sweep`: `ts` checked against the scene's
+    span, or `n_save` (an int >= 2) points over it; float64."""
+    if ts is None:
+        check_int("n_save", n_save, 2)
+        ts = jnp.linspace(scene.t0, scene.t1, n_save)
+    else:
+        check_times("ts", ts, scene.t0, scene.t1)
+    return jnp.asarray(ts, dtype=jnp.float64)
+
+
 def simulate(
     scene: Scene,
     solver="kvaerno5",
@@ -288,12 +299,7 @@ def simulate(
         check_positive("newton_atol", newton_atol)
     check_bool("project", project)
     check_bool("progress", progress)
-    if ts is None:
-        check_int("n_save", n_save, 2)
-        ts = jnp.linspace(scene.t0, scene.t1, n_save)
-    else:
-        check_times("ts", ts, scene.t0, scene.t1)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
+    ts = _save_times(scene, ts, n_save)
     f64 = lambda x: None if x is None else jnp.asarray(x, dtype=jnp.float64)
     config = SolveConfig(
         solver=solver,
