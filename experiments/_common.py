@@ -390,19 +390,28 @@ def run_study(main, doc, lists=None, **options):
     ``--repeats N`` (0: the study's default); `lists` maps main's keyword to the
     type of a comma-separated option (``--EAs 1e4,1e6``; empty: the default);
     `options` maps main's keyword to argparse keywords (``default``, ``type``,
-    ``help``, ``choices``; the flag is ``--keyword`` unless ``flag`` names it)."""
+    ``help``, ``choices``; the flag is ``--keyword`` unless ``flag`` names it).
+    An option without ``default`` takes main's default, and without ``type`` or
+    ``action`` the type of that default where it is an int or a float."""
     import argparse
     import inspect
 
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes")
-    takes_repeats = "repeats" in inspect.signature(main).parameters
+    params = inspect.signature(main).parameters
+    takes_repeats = "repeats" in params
     if takes_repeats:
         parser.add_argument("--repeats", type=int, default=0, help="timing repeats")
     for name in lists or {}:
         parser.add_argument(f"--{name}", default="", help="comma-separated")
     for name, kw in options.items():
         kw = dict(kw)
+        given = params[name].default
+        if "default" not in kw and given is not inspect.Parameter.empty:
+            kw["default"] = given
+        plain = type(kw.get("default")) in (int, float)
+        if plain and "type" not in kw and "action" not in kw:
+            kw["type"] = type(kw["default"])
         parser.add_argument(f"--{kw.pop('flag', name)}", dest=name, **kw)
     args = vars(parser.parse_args())
     for name, conv in (lists or {}).items():
@@ -464,6 +473,18 @@ def quiet_fd():
         os.dup2(saved[1], 2)
         for fd in (*saved, null):
             os.close(fd)
+
+
+def moordyn_start(path):
+    """Create a MoorDyn system from the input file `path` and initialise it (its
+    initial-condition solve; no coupled bodies): (system, seconds taken). Call it
+    inside `quiet_fd()` to silence MoorDyn's console output."""
+    import moordyn
+
+    t0 = time.perf_counter()
+    system = moordyn.Create(path)
+    moordyn.Init(system, [], [])
+    return system, time.perf_counter() - t0
 
 
 def timed_wall_cpu(fn, repeats):

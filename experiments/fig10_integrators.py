@@ -337,5 +337,5 @@ if __name__ == "__main__":
         main,
         __doc__,
         lists={"EAs": float, "solvers": str, "jacs": str},
-        formulation=dict(default="angle"),
+        formulation=dict(help="string formulation"),
     )

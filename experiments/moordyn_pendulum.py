@@ -110,10 +110,7 @@ def run_moordyn(ts, cfl=0.1, quick=False, workdir=None):
             )
         )
     with common.quiet_fd():
-        t0 = time.perf_counter()
-        system = moordyn.Create(path)
-        moordyn.Init(system, [], [])
-        init_s = time.perf_counter() - t0
+        system, init_s = common.moordyn_start(path)
         line = moordyn.GetLine(system, 1)
         nodes0 = np.array(
             [

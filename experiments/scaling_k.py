@@ -241,15 +241,14 @@ if __name__ == "__main__":
         main,
         __doc__,
         lists={"ks": int, "solvers": str, "peers": str},
-        formulation=dict(default="angle"),
+        formulation=dict(help="string formulation"),
         out_name=dict(
             flag="name",
-            default="",
             help="name of a variant study: files scaling_k_<name>.* (default: "
             "scaling_k.*)",
         ),
-        start=dict(default="release", choices=("release", "swing")),
-        budget_s=dict(flag="budget", type=float, default=90.0),
-        tol=dict(type=float, default=1e-7, help="rtol = atol"),
-        rounds=dict(type=int, default=0, help="re-time in interleaved rounds"),
+        start=dict(choices=("release", "swing")),
+        budget_s=dict(flag="budget"),
+        tol=dict(help="rtol = atol"),
+        rounds=dict(help="re-time in interleaved rounds"),
     )

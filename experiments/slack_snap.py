@@ -155,33 +155,16 @@ def step_log(formulation, case, k, smoothing, solver, rtol=TOL):
     tension points whose state (taut: eps > 0) changed over each step."""
     import diffrax as dfx
 
-    from jaxstring._scene import scene_vector_field
-    from jaxstring._solvers.projected import ProjectedSolver
-    from jaxstring._solvers.registry import build_solver
-    from jaxstring._solvers.step_size import make_controller
+    from jaxstring._simulate import SolveConfig, _diffeqsolve
 
     sc = scene(formulation, case, k, smoothing)
-    f64 = lambda x: jnp.asarray(x, jnp.float64)
-    solver_ = build_solver(solver, f64(rtol), f64(rtol), sc)
-    if sc.model.projects:
-        solver_ = ProjectedSolver(solver_)
-    controller = make_controller(solver, f64(rtol), f64(rtol), True, "auto")
+    # `simulate`'s solver, step control and projection, saved at every step
+    config = SolveConfig(solver=solver, rtol=rtol, atol=rtol, max_steps=MAX_STEPS)
 
     @jax.jit
     def solve(sc):
-        sol = dfx.diffeqsolve(
-            dfx.ODETerm(scene_vector_field),
-            solver_,
-            t0=sc.t0,
-            t1=sc.t1,
-            dt0=None,
-            y0=sc.y0,
-            args=sc,
-            saveat=dfx.SaveAt(steps=True, fn=lambda t, y, a: a.model.strain(y)[0]),
-            stepsize_controller=controller,
-            max_steps=MAX_STEPS,
-            throw=False,
-        )
+        strain = lambda t, y, a: a.model.strain(y)[0]
+        sol = _diffeqsolve(sc, config, lambda _: dfx.SaveAt(steps=True, fn=strain))
         return sol.ts, sol.ys
 
     ts, eps = solve(sc)

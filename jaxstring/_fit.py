@@ -279,31 +279,29 @@ def resolve_params(scene, params, positive):
     return getters, positive
 
 
-def _solve_options(
-    solver="kvaerno5",
-    rtol=1e-8,
-    atol=1e-8,
-    n_save=201,
-    dt0=None,
-    max_steps=200_000,
-    project=True,
-    **unknown,
-):
-    """The solve options of `fit` and its relatives, with their defaults."""
+# The solve options of `fit` and its relatives, with their defaults, in the order
+# of `_solve_options`'s positional arguments.
+_SOLVE_DEFAULTS = {
+    "solver": "kvaerno5",
+    "rtol": 1e-8,
+    "atol": 1e-8,
+    "n_save": 201,
+    "dt0": None,
+    "max_steps": 200_000,
+    "project": True,
+}
+
+
+def _solve_options(*values, **options):
+    """The solve options of `fit` and its relatives: `values` in the order of
+    `_SOLVE_DEFAULTS`, `options` by name, the defaults for the others."""
+    unknown = sorted(set(options) - set(_SOLVE_DEFAULTS))
     if unknown:
         raise ValueError(
-            f"unknown option(s) {sorted(unknown)}; valid: solver, rtol, atol, "
-            "n_save, dt0, max_steps, project (and the function's own arguments)."
+            f"unknown option(s) {unknown}; valid: {', '.join(_SOLVE_DEFAULTS)} "
+            "(and the function's own arguments)."
         )
-    return dict(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        n_save=n_save,
-        dt0=dt0,
-        max_steps=max_steps,
-        project=project,
-    )
+    return _SOLVE_DEFAULTS | dict(zip(_SOLVE_DEFAULTS, values)) | options
 
 
 def _setup(

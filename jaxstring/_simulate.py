@@ -106,17 +106,12 @@ def _default_adjoint(adjoint) -> bool:
     )
 
 
-def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
-    """Integrate `scene`: the one solve behind `simulate`, `fit` and `sweep`.
-
-    Usable inside `jax.grad`, `jax.vmap` and `jit`: no check here looks at array
-    values (the scene may be traced); `config` was checked when it was built. `ts`
-    defaults to `config.n_save` points over the span. A failed solve does not raise:
-    the Trajectory's `result` says why, with the data up to the failure.
+def _diffeqsolve(scene: Scene, config: SolveConfig, saveat):
+    """diffrax's solution of `scene` under `config`: the solve of `solve`, saved as
+    `saveat(fn)` says, with `fn` the projection onto the constraint manifold for a
+    projected solve (None: the state as is). E.g. every step:
+    `saveat=lambda fn: dfx.SaveAt(steps=True)`.
     """
-    if ts is None:
-        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
     adaptive = is_adaptive(config.solver)
     dt0 = config.dt0
@@ -132,6 +127,7 @@ def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
             f"constraint ({type(scene.model).__name__}); use 'recursive'."
         )
     solver = build_solver(config.solver, f64(nr), f64(na), scene)
+    save_fn = None
     if config.project and scene.model.projects:
         if not _default_adjoint(config.adjoint):
             # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
@@ -148,9 +144,7 @@ def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
             solver = _ProjectedSolverAD(solver)
         else:
             solver = ProjectedSolver(solver)
-        saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.model.project(y))
-    else:
-        saveat = dfx.SaveAt(ts=ts)
+        save_fn = lambda t, y, args: args.model.project(y)
     controller = make_controller(
         config.solver, f64(config.rtol), f64(config.atol), adaptive, config.step_control
     )
@@ -159,7 +153,7 @@ def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
         if config.progress
         else dfx.NoProgressMeter()
     )
-    sol = dfx.diffeqsolve(
+    return dfx.diffeqsolve(
         dfx.ODETerm(scene_vector_field),
         solver,
         t0=scene.t0,
@@ -167,12 +161,30 @@ def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
         dt0=dt0,
         y0=scene.y0,
         args=scene,
-        saveat=saveat,
+        saveat=saveat(save_fn),
         stepsize_controller=controller,
         max_steps=config.max_steps,
         throw=False,
         progress_meter=meter,
         adjoint=adjoint,
+    )
+
+
+def solve(scene: Scene, config: SolveConfig, ts=None) -> Trajectory:
+    """Integrate `scene`: the one solve behind `simulate`, `fit` and `sweep`.
+
+    Usable inside `jax.grad`, `jax.vmap` and `jit`: no check here looks at array
+    values (the scene may be traced); `config` was checked when it was built. `ts`
+    defaults to `config.n_save` points over the span. A failed solve does not raise:
+    the Trajectory's `result` says why, with the data up to the failure.
+    """
+    if ts is None:
+        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    sol = _diffeqsolve(
+        scene,
+        config,
+        lambda fn: dfx.SaveAt(ts=ts) if fn is None else dfx.SaveAt(ts=ts, fn=fn),
     )
     return Trajectory.from_solution(ts, sol.ys, sol.result, sol.stats, scene)
 
@@ -194,6 +206,17 @@ def _solve_saved(scene, config, ts) -> Trajectory:
     if fields is None:
         return _solve(scene, config, ts)
     return Trajectory(**(fields | {"result": result_from_code(fields["result"])}))
+
+
+def _save_times(scene: Scene, ts, n_save):
+    """The save times of `simulate` and `sweep`: `ts` checked against the scene's
+    span, or `n_save` (an int >= 2) points over it; float64."""
+    if ts is None:
+        check_int("n_save", n_save, 2)
+        ts = jnp.linspace(scene.t0, scene.t1, n_save)
+    else:
+        check_times("ts", ts, scene.t0, scene.t1)
+    return jnp.asarray(ts, dtype=jnp.float64)
 
 
 def simulate(
@@ -276,12 +299,7 @@ def simulate(
         check_positive("newton_atol", newton_atol)
     check_bool("project", project)
     check_bool("progress", progress)
-    if ts is None:
-        check_int("n_save", n_save, 2)
-        ts = jnp.linspace(scene.t0, scene.t1, n_save)
-    else:
-        check_times("ts", ts, scene.t0, scene.t1)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
+    ts = _save_times(scene, ts, n_save)
     f64 = lambda x: None if x is None else jnp.asarray(x, dtype=jnp.float64)
     config = SolveConfig(
         solver=solver,

@@ -84,7 +84,7 @@ import numpy as np
 from ._fit import _follow, parameter_names, resolve
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._simulate import SolveConfig, solve
+from ._simulate import SolveConfig, _save_times, solve
 from ._solvers.diffrax_compat import code_message, result_code
 from ._solvers.fixed_step import ThetaMethod
 from ._solvers.projected import ProjectedSolver
@@ -92,7 +92,7 @@ from ._solvers.registry import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
 from ._solvers.stage_newton import StageNewton
 from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
-from ._validate import check_choice, check_int, check_times, show
+from ._validate import check_choice, check_int, show
 
 
 class SweepResult(eqx.Module):
@@ -729,12 +729,8 @@ def sweep(
         max_steps=max_steps,
         project=project,
     )
-    if ts is not None:
-        check_times("ts", ts, scene.t0, scene.t1)
+    ts = _save_times(scene, ts, n_save)
     fn = _default_fn if fn is None else fn
-    if ts is None:
-        ts = jnp.linspace(scene.t0, scene.t1, n_save)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
 
     perm = np.lexsort(arrays[::-1]) if order == "sort" else np.arange(n)
     if devices == "auto":

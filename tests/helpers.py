@@ -1,7 +1,6 @@
 """Shared helpers: cached simulations so that tests reuse compiled solves."""
 
 import functools
-import math
 
 import jax
 import jax.numpy as jnp
@@ -20,30 +19,18 @@ def run(
     EA=1e4,
     alpha=0.01,
     t1=1.0,
-    theta0=math.pi / 2,
     solver="kvaerno5",
     rtol=1e-8,
     atol=1e-8,
     n_save=101,
-    effects=None,
-    mu=1.0,
-    m_s=1.0,
-    dim=2,
     max_steps=200_000,
+    **scene_options,
 ):
-    """Simulate a string pendulum; cached on all arguments."""
-    kw = {} if effects is None else {"effects": effects}
+    """Simulate a string pendulum, saved at `n_save` points over [0, t1];
+    `scene_options`: further arguments of `string_pendulum` (`theta0`, `mu`, `m_s`,
+    `l`, `g`, `dim`, `effects`, ...). Cached on all arguments."""
     scene = js.scenes.string_pendulum(
-        formulation=formulation,
-        k=k,
-        EA=EA,
-        alpha=alpha,
-        t1=t1,
-        theta0=theta0,
-        mu=mu,
-        m_s=m_s,
-        dim=dim,
-        **kw,
+        formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, **scene_options
     )
     ts = jnp.linspace(0.0, t1, n_save)
     return js.simulate(scene, solver, rtol=rtol, atol=atol, ts=ts, max_steps=max_steps)

@@ -190,24 +190,14 @@ def test_three_d_out_of_plane_swing_conserves_energy_and_agrees():
     # A conical swing: out-of-plane velocity at release.
     out = {}
     for formulation in ("displacement", "natural"):
-        base = js.scenes.string_pendulum(
-            formulation=formulation, k=10, EA=1e4, alpha=0.0, dim=3, t1=1.0
-        )
-        y0 = np.array(base.y0)
+        args = dict(formulation=formulation, k=10, EA=1e4, alpha=0.0, dim=3, t1=1.0)
+        y0 = np.array(js.scenes.string_pendulum(**args).y0)
         s = np.arange(11) / 10
         if formulation == "displacement":
             y0[:, 5] = 2.0 * s[1:]  # z-velocity of nodes, rigid rotation about y
         else:
             y0[:, 7] = 2.0  # dt/dt = omega x t: z-component of t'
-        scene = js.scenes.string_pendulum(
-            formulation=formulation,
-            k=10,
-            EA=1e4,
-            alpha=0.0,
-            dim=3,
-            t1=1.0,
-            y0=jnp.asarray(y0),
-        )
+        scene = js.scenes.string_pendulum(**args, y0=jnp.asarray(y0))
         traj = js.simulate(scene, rtol=1e-9, atol=1e-9, ts=jnp.linspace(0, 1, 51))
         assert traj.ok, traj.status
         e = np.asarray(traj.energy)

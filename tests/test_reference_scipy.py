@@ -26,12 +26,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import functools
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-import jaxstring
+from .helpers import run
 
 
 K = 10
@@ -163,21 +162,20 @@ def _reference(alpha):
     return model, sol.y.T
 
 
-@functools.cache
 def _jaxstring(alpha):
-    scene = jaxstring.scenes.string_pendulum(
-        formulation="displacement",
+    traj = run(
+        "displacement",
         k=K,
         EA=EA,
         alpha=alpha,
-        l=L,
+        t1=T1,
+        rtol=1e-10,
+        atol=1e-10,
+        n_save=N_SAVE,
         mu=MU,
         m_s=M_S,
+        l=L,
         g=GRAV,
-        t1=T1,
-    )
-    traj = jaxstring.simulate(
-        scene, "kvaerno5", rtol=1e-10, atol=1e-10, ts=jnp.linspace(0.0, T1, N_SAVE)
     )
     assert traj.ok, f"jaxstring failed (alpha={alpha}): {traj.status}"
     return traj

@@ -67,51 +67,6 @@ PAPER_FAST_PATH = (
 )
 
 
-def _tether_model(
-    method,
-    *,
-    N,
-    L,
-    d,
-    rho,
-    added_mass,
-    T,
-    T1,
-    k,
-    k_lms,
-    c_lms,
-    omega,
-    end_links,
-    root,
-    fast,
-    released,
-    feedforward,
-):
-    check_choice("method", method, tuple(TETHER_METHODS))
-    mass_per_length = rho * np.pi * d**2 / 4  # neutral buoyancy
-    common = dict(
-        L=L,
-        d=d,
-        mass_per_length=mass_per_length,
-        added_mass=added_mass,
-        N=N,
-        root=root,
-        fast=fast,
-        released=released,
-    )
-    if method == "aceam":
-        return TETHER_METHODS[method](
-            T=T, T1=T1, k=k, feedforward=feedforward, **common
-        )
-    if method == "exact":
-        return TETHER_METHODS[method](omega=omega, k=k, end_links=end_links, **common)
-    if k_lms is None:
-        k_lms = 40.0 * k
-    else:
-        check_positive("k_lms", k_lms, "N")
-    return TETHER_METHODS[method](k=k_lms, c=c_lms, **common)
-
-
 def _check_common(N, L, d, rho, t1):
     check_int("N", N, 2)
     check_positive("L", L, "m")
@@ -173,24 +128,25 @@ def tether_fixed(
     schedule = None
     if released is not None:
         schedule = PiecewiseLinear(times, released, smoothing=smoothing)
-    model = _tether_model(
-        method,
-        N=N,
+    check_choice("method", method, tuple(TETHER_METHODS))
+    if method == "aceam":
+        link_options = dict(T=T, T1=T1, k=k, feedforward=feedforward)
+    elif method == "exact":
+        link_options = dict(omega=omega, k=k, end_links=end_links)
+    else:
+        if k_lms is not None:
+            check_positive("k_lms", k_lms, "N")
+        link_options = dict(k=40.0 * k if k_lms is None else k_lms, c=c_lms)
+    model = TETHER_METHODS[method](
         L=L,
         d=d,
-        rho=rho,
+        mass_per_length=rho * np.pi * d**2 / 4,  # neutral buoyancy
         added_mass=added_mass,
-        T=T,
-        T1=T1,
-        k=k,
-        k_lms=k_lms,
-        c_lms=c_lms,
-        omega=omega,
-        end_links=end_links,
+        N=N,
         root=FixedEnd(jnp.zeros(3)),
         fast=fast,
         released=schedule,
-        feedforward=feedforward,
+        **link_options,
     )
     c_t_drag = c_t / np.pi if tangential_area == "projected" else c_t
     effects = (
