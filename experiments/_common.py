@@ -383,6 +383,11 @@ def parse_list(text, conv=float):
     return [] if text == "none" else [conv(x) for x in text.split(",")]
 
 
+# The comma-separated options of the pendulum studies that sweep formulations,
+# stiffnesses and solvers (`run_study`'s `lists`).
+PENDULUM_LISTS = {"formulations": str, "EAs": float, "solvers": str}
+
+
 def run_study(main, doc, lists=None, **options):
     """Parse a study script's command line and call `main` with it.
 

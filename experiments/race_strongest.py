@@ -601,13 +601,7 @@ if __name__ == "__main__":
     common.run_study(
         main,
         __doc__,
-        lists={
-            "formulations": str,
-            "EAs": float,
-            "targets": float,
-            "solvers": str,
-            "scipy": str,
-        },
+        lists={**common.PENDULUM_LISTS, "targets": float, "scipy": str},
         no_callback=dict(action="store_true", help="leave out CVODE on JAX callbacks"),
         out_name=dict(flag="name", default="", help="variant: race_strongest_<name>.*"),
     )

@@ -238,13 +238,7 @@ if __name__ == "__main__":
     common.run_study(
         main,
         __doc__,
-        lists={
-            "formulations": str,
-            "EAs": float,
-            "tols": float,
-            "solvers": str,
-            "peers": str,
-        },
+        lists={**common.PENDULUM_LISTS, "tols": float, "peers": str},
         out_name=dict(
             flag="name",
             default="",
