@@ -182,13 +182,17 @@ def reference_lag(case):
     return float(lags[int(np.argmin(cost))])
 
 
-def chain_scene(case, motion, t1, axial_drag="surface", refine=1, options=None):
+def chain_scene(
+    case, motion, t1, axial_drag="surface", refine=1, options=None, types=None
+):
     """The chain deck's scene under a motion table, its segments times `refine`,
-    deck options replaced by `options` (a dict)."""
+    deck options and line-type values replaced by `options` and `types` (dicts)."""
     deck = lines.parse_moordyn(lines.case_path(f"{case}_Chain.txt"))
     for ln in deck.lines:
         ln["segments"] *= refine
     deck.options.update(options or {})
+    for values in deck.types.values():
+        values.update(types or {})
     return lines.deck_scene(
         deck, motion=(motion[:, 0], motion[:, 1:4]), t1=t1, axial_drag=axial_drag
     )
@@ -660,6 +664,9 @@ def chain_error_study(quick):
             ("x4 segments", 1e-5, {"refine": 4}),
             ("friction 500x sharper (FricDamp 1e5)", 1e-5,
              {"options": {"fric_damp": 1e5}}),
+            ("axial added mass CaAx 0.5 (OrcaFlex's chain)", 1e-5,
+             {"types": {"CaAx": 0.5}}),
+            ("no internal damping (BA 0)", 1e-5, {"types": {"BA": 0.0}}),
             ("ramp", 1e-5, {"ramp": True}),
             ("ramp, CdAx on d", 1e-5, {"ramp": True, "axial_drag": "diameter"}),
             ("ramp, CdAx on d", 1e-6, {"ramp": True, "axial_drag": "diameter"}),
@@ -670,7 +677,7 @@ def chain_error_study(quick):
              {"ramp": True, "axial_drag": "diameter", "lag": lag}),
         ]  # fmt: skip
         if quick:
-            settings = settings[:1] + settings[7:9]
+            settings = settings[:1] + settings[9:11]
         for label, rtol, kw in settings:
             kw = dict(kw)
             ramp = kw.pop("ramp", False)
