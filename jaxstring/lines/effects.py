@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 
 from .._effect import AbstractLoad
 from .._geometry import safe_norm
-from .._validate import check_nonnegative, check_shape
+from .._validate import check_choice, check_nonnegative, check_shape
 
 
 def _f64(x):
@@ -117,17 +117,33 @@ class Drag(AbstractLineLoad):
     gradient are finite (zero) at zero relative velocity. The current is the
     scene's `Environment.current` (still water without one).
 
+    The axial coefficient's reference area differs between codes: MoorDyn
+    applies CdAx to the wetted surface pi d l_s, while DNV-OS-E301's chain
+    coefficients (studless: 2.4 normal, 1.15 axial, on the bar diameter) and
+    OrcaFlex's chain line type (axial drag diameter d/pi) apply it to d l_s.
+    A deck whose CdAx was converted from those values (1.15 / 1.8 = 0.64 on the
+    1.8 d volumetric diameter) gets pi times their axial drag in MoorDyn.
+
     **Arguments:**
 
     - `scale`: a factor on every drag coefficient (default 1; MoorDyn's CdScaleIC
       uses > 1 to damp a relaxation).
+    - `axial_area`: the reference area of CdAx per unit length: `"surface"`
+      (pi d, MoorDyn's, default) or `"diameter"` (d, DNV-OS-E301 and OrcaFlex's
+      chain).
     """
 
     scale: Float[Array, ""] = eqx.field(converter=_f64, default=1.0)
+    axial_area: str = eqx.field(static=True, default="surface")
 
     def __check_init__(self):
         check_shape("scale", self.scale, ())
         check_nonnegative("scale", self.scale)
+        check_choice("axial_area", self.axial_area, ("surface", "diameter"))
+
+    @property
+    def _axial_factor(self):
+        return jnp.pi if self.axial_area == "surface" else 1.0
 
     def forces(self, t, kin, env):
         u = env.water_velocity(t, kin.positions) - kin.velocities
@@ -137,7 +153,7 @@ class Drag(AbstractLineLoad):
         half = 0.5 * env.rho_water * kin.diameter * kin.submerged_length
         f = half[:, None] * (
             kin.Cd[:, None] * safe_norm(up, keepdims=True) * up
-            + jnp.pi * kin.CdAx[:, None] * safe_norm(uq, keepdims=True) * uq
+            + self._axial_factor * kin.CdAx[:, None] * safe_norm(uq, keepdims=True) * uq
         )
         pu = env.water_velocity(t, kin.point_positions) - kin.point_velocities
         fp = (0.5 * env.rho_water * kin.point_CdA)[:, None] * (

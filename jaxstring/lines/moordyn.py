@@ -477,6 +477,24 @@ def read_motion(path, n_coupled=None):
     return t, data[:, 1:4]
 
 
+def ramp_in(times, offsets, duration):
+    """A motion table's offsets ramped in over its first `duration` seconds:
+    times sin^2(pi/2 (t - t0)/duration), so that a table that starts at full
+    speed (such as ZZP1_A1 at t = -10 s) starts from rest with no step in the
+    point's velocity. Returns the offsets `(K, 3)`, m."""
+    times = np.asarray(times, float)
+    offsets = np.asarray(offsets, float)
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"`duration` must be > 0 s; got {duration!r}.")
+    if offsets.shape != (times.shape[0], 3):
+        raise ValueError(
+            f"`offsets` must have shape ({times.shape[0]}, 3) (one row per time); "
+            f"got {offsets.shape}."
+        )
+    s = np.clip((times - times[0]) / duration, 0.0, 1.0)
+    return offsets * (np.sin(0.5 * np.pi * s) ** 2)[:, None]
+
+
 def deck_scene(
     deck: MoorDynDeck,
     motion=None,
@@ -484,6 +502,7 @@ def deck_scene(
     t0=None,
     static=True,
     free_points="hold",
+    axial_drag="surface",
 ) -> Scene:
     """The `Scene` of a parsed deck.
 
@@ -497,9 +516,14 @@ def deck_scene(
     - `static`: start from the static equilibrium at t0 (`equilibrium`), else from
       the catenary guess (`initial_shape`).
     - `free_points`: "hold" (MoorDyn's initial condition) or "solve".
+    - `axial_drag`: the reference area of the line types' CdAx per unit length,
+      `"surface"` (pi d, MoorDyn's) or `"diameter"` (d, DNV-OS-E301's and
+      OrcaFlex's chain convention; see `Drag`).
     """
+    from .._validate import check_choice
     from .models import initial_shape
 
+    check_choice("axial_drag", axial_drag, ("surface", "diameter"))
     o = deck.options
     times = None
     if isinstance(motion, (str, os.PathLike)):
@@ -553,7 +577,7 @@ def deck_scene(
         line_ids=tuple(ln["id"] for ln in deck.lines),
         point_ids=tuple(p["id"] for p in deck.points),
     )
-    effects = [Gravity(), Drag()]
+    effects = [Gravity(), Drag(axial_area=axial_drag)]
     if o["depth"] > 0:
         effects.append(
             Seabed(
@@ -578,10 +602,19 @@ def deck_scene(
     return Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
 
 
-def read_moordyn(path, motion=None, t1=None, t0=None, static=True) -> Scene:
+def read_moordyn(
+    path, motion=None, t1=None, t0=None, static=True, axial_drag="surface"
+) -> Scene:
     """Read a MoorDyn v2 deck into a `Scene` at static equilibrium (see
     `parse_moordyn` and `deck_scene` for the arguments)."""
-    return deck_scene(parse_moordyn(path), motion=motion, t1=t1, t0=t0, static=static)
+    return deck_scene(
+        parse_moordyn(path),
+        motion=motion,
+        t1=t1,
+        t0=t0,
+        static=static,
+        axial_drag=axial_drag,
+    )
 
 
 @eqx.filter_jit
