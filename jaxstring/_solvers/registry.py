@@ -165,8 +165,8 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
     if solver == "dopri5":
         return dfx.Dopri5()
     if solver == "bdf":
-        # A stored Jacobian serves later steps only where the stiff force does not
-        # turn with the state: the same declaration as Kvaerno's per-stage one.
-        reuse = not scene.model.stage_jacobians(scene.effects)
+        # A stored Jacobian serves later steps unless the model says its stiff
+        # directions turn too fast with the state (`AbstractModel.step_jacobians`).
+        reuse = not scene.model.step_jacobians(scene.effects)
         return BDF(rtol=newton_rtol, atol=newton_atol, reuse_jacobian=reuse)
     raise AssertionError(solver)

@@ -236,6 +236,12 @@ class DisplacementString(AbstractString):
         del effects
         return True
 
+    def step_jacobians(self, effects):
+        """True: for the same reason a BDF step takes a fresh Jacobian every step
+        (`AbstractModel`)."""
+        del effects
+        return True
+
     def vf_jacobian(self, t, y, effects, env):
         """The exact Jacobian of `vector_field`, element by element
         (`AbstractModel.vf_jacobian`), under jaxstring's string effects (gravity is
