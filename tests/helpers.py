@@ -75,6 +75,18 @@ def assert_grad_matches_central_differences(
         assert rel < rtol, f"d/d{name}: {float(grad[name])} vs {fd}"
 
 
+def central_differences(fn, p0, rel_step):
+    """The central-difference Jacobian of `fn` at the parameter vector `p0`: one
+    column (fn(p0 + h e_i) - fn(p0 - h e_i)) / (2 h) per parameter, h = rel_step
+    p0_i, stacked on the last axis."""
+    cols = []
+    for i in range(p0.size):
+        h = rel_step * p0[i]
+        e = jnp.zeros_like(p0).at[i].set(h)
+        cols.append((fn(p0 + e) - fn(p0 - e)) / (2 * h))
+    return jnp.stack(cols, axis=-1)
+
+
 def count_eqns(jaxpr) -> int:
     """Number of equations in a jaxpr, counting those of its sub-jaxprs."""
     n = 0
