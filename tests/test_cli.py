@@ -109,3 +109,29 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
     assert jnp.allclose(other["y"], 1.5 * expected, rtol=1e-15, atol=1e-15)
     assert int(second["n"]) == 4  # 0.5, 1, 1.5, 2
     assert bad is None  # host callbacks: no program, the caller runs it its own way
+
+
+@pytest.mark.parametrize(
+    "extra, named",
+    [
+        (["--ramp", "5"], "--ramp"),  # no motion table to ramp in
+        (["--motion", "ZZP1_A1.txt", "--ramp", "-1"], "--ramp"),
+        (["--axial-drag", "area"], "axial-drag"),
+    ],
+)
+def test_moordyn_bad_options_exit_2(tmp_path, capsys, extra, named):
+    from jaxstring import lines
+
+    deck = lines.case_path("WD0050_Chain.txt")
+    extra = [
+        lines.case_path("QuasiStatic/ZZP1_A1.txt") if a == "ZZP1_A1.txt" else a
+        for a in extra
+    ]
+    argv = ["run", "moordyn", deck, "--out", str(tmp_path), *extra]
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse refuses an invalid choice
+        code = exc.code
+    assert code == 2
+    assert named in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.out"))

@@ -1,4 +1,5 @@
-"""``jaxstring run moordyn DECK [--motion FILE] [--t1 T] ...``: a MoorDyn v2 deck.
+"""``jaxstring run moordyn DECK [--motion FILE] [--ramp S] [--t1 T] ...``: a MoorDyn
+v2 deck.
 
 Reads the deck (`jaxstring.lines.read_moordyn`), solves its static equilibrium,
 prints the static end tensions of every line, simulates the span and writes the
@@ -29,6 +30,21 @@ def add_parser(scene_parsers, common_arguments, cache_arguments) -> None:
     p.add_argument("--t1", type=float, default=None, help="end time, s "
                    "(default: the motion table's last time, else t0 + 10)")  # fmt: skip
     p.add_argument(
+        "--ramp",
+        type=float,
+        default=None,
+        help="ramp the motion table in from rest over its first RAMP seconds "
+        "(`jaxstring.lines.ramp_in`), s",
+    )
+    p.add_argument(
+        "--axial-drag",
+        dest="axial_drag",
+        choices=("surface", "diameter"),
+        default="surface",
+        help="area of the line types' CdAx: 'surface' (pi d, MoorDyn's, default) "
+        "or 'diameter' (d, DNV's and OrcaFlex's chain convention)",
+    )
+    p.add_argument(
         "--dt-out", dest="dt_out", type=float, default=0.1, help="output step, s"
     )
     common_arguments(p, "kvaerno5")
@@ -50,9 +66,16 @@ def run(args: argparse.Namespace) -> int:
         check_positive("rtol", args.rtol)
         check_positive("atol", args.atol)
         check_positive("--dt-out", args.dt_out, "s")
+        motion = args.motion
+        if args.ramp is not None:
+            check_positive("--ramp", args.ramp, "s")
+            if motion is None:
+                raise ValueError("`--ramp` needs a `--motion` table to ramp in.")
+            times, offsets = lines.read_motion(motion)
+            motion = (times, lines.ramp_in(times, offsets, args.ramp))
         start = time.perf_counter()
-        scene = lines.read_moordyn(args.deck, motion=args.motion, t1=args.t1,
-                                   t0=args.t0)  # fmt: skip
+        scene = lines.read_moordyn(args.deck, motion=motion, t1=args.t1, t0=args.t0,
+                                   axial_drag=args.axial_drag)  # fmt: skip
         setup_s = time.perf_counter() - start
         os.makedirs(args.out, exist_ok=True)
     except (ValueError, OSError) as e:
