@@ -375,19 +375,9 @@ class BDF(dfx.AbstractAdaptiveSolver):
         def residual(d):
             return c * terms.vf(t1, y_pred + d, args) - psi - d
 
-        # Skip the stored Jacobian where it has kept failing (module doc).
-        skip = (st.n_refresh >= _SKIP_STORED_AFTER) & (
-            st.n_refresh % _RETRY_STORED != 0
-        )
-        # The stored factorisation, or a fresh one if c moved by more than 30 %.
-        stale_c = (jnp.abs(c / st.c_lu - 1) > _REFACTOR_CHANGE) & ~skip
-
         def fresh_factor():
             jac = self._jacobian(terms, t1, y_pred, args, width)
             return _linalg.factor(jac.scale_shift(1.0, -c))
-
-        lu0 = lax.stop_gradient(st.lu)
-        c_lu0 = lax.stop_gradient(st.c_lu)
 
         def newton(fn, d0, lu, c_lu):
             corr = 2.0 / (1.0 + c / c_lu)  # CVODE's chord scaling for c != c_lu
@@ -426,16 +416,28 @@ class BDF(dfx.AbstractAdaptiveSolver):
             k, d, _, conv, _ = lax.while_loop(cond, body, init)
             return d, conv, k
 
-        def solve_fresh(fn, d0):
-            # A fresh factorisation at every step, none stored (`reuse_jacobian`).
-            lu = fresh_factor()
-            d, conv, k = newton(fn, d0, lu, c)
-            aux_tree = (conv, k, None, c, jnp.array(False))
+        def with_aux(d, aux_tree):
+            # custom_root gives its aux output tangents of the aux dtype, which
+            # JAX rejects for integers (float0 expected): pass them as floats.
             leaves, treedef = jax.tree_util.tree_flatten(aux_tree)
             aux_types.append((treedef, [x.dtype for x in leaves]))
             return d, [x.astype(dtype) for x in leaves]
 
+        def solve_fresh(fn, d0):
+            # A fresh factorisation at every step, none stored (`reuse_jacobian`).
+            lu = fresh_factor()
+            d, conv, k = newton(fn, d0, lu, c)
+            return with_aux(d, (conv, k, None, c, jnp.array(False)))
+
         def solve(fn, d0):
+            # Skip the stored Jacobian where it has kept failing (module doc).
+            skip = (st.n_refresh >= _SKIP_STORED_AFTER) & (
+                st.n_refresh % _RETRY_STORED != 0
+            )
+            # The stored factorisation, or a fresh one if c moved by more than 30 %.
+            stale_c = (jnp.abs(c / st.c_lu - 1) > _REFACTOR_CHANGE) & ~skip
+            lu0 = lax.stop_gradient(st.lu)
+            c_lu0 = lax.stop_gradient(st.c_lu)
             # First the stored factorisation, unless it is being skipped or c has
             # changed; then, if that did not converge, a fresh one. (One fresh
             # factorisation in the program, not one per case: each is a Jacobian
@@ -455,12 +457,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
                 return d_a, conv_a, k_a, lu0, c_lu0
 
             d, conv, k, lu, c_lu = lax.cond(conv_a, keep, refresh)
-            # custom_root gives its aux output tangents of the aux dtype, which
-            # JAX rejects for integers (float0 expected): pass them as floats.
-            aux_tree = (conv, k, lu, c_lu, ~conv_a & ~stale_c)
-            leaves, treedef = jax.tree_util.tree_flatten(aux_tree)
-            aux_types.append((treedef, [x.dtype for x in leaves]))
-            return d, [x.astype(dtype) for x in leaves]
+            return with_aux(d, (conv, k, lu, c_lu, ~conv_a & ~stale_c))
 
         def tangent_solve(g, b):
             # g(v) = (c J - I) v at the solution; exact solve (derivative passes only).
