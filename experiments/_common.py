@@ -388,8 +388,9 @@ def parse_list(text, conv=float):
 PENDULUM_LISTS = {"formulations": str, "EAs": float, "solvers": str}
 
 
-def run_study(main, doc, lists=None, **options):
-    """Parse a study script's command line and call `main` with it.
+def run_study(main, lists=None, **options):
+    """Parse a study script's command line and call `main` with it; the script's
+    docstring is the command's description.
 
     Every study takes ``--quick`` (small sizes, results under results/quick/) and
     ``--repeats N`` (0: the study's default); `lists` maps main's keyword to the
@@ -400,8 +401,10 @@ def run_study(main, doc, lists=None, **options):
     ``action`` the type of that default where it is an int or a float."""
     import argparse
     import inspect
+    import sys
 
-    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    doc = sys.modules[main.__module__].__doc__ or ""
+    parser = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes")
     params = inspect.signature(main).parameters
     takes_repeats = "repeats" in params

@@ -335,7 +335,6 @@ def _plot(rows, EAs, formulation, k, tag):
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         lists={"EAs": float, "solvers": str, "jacs": str},
         formulation=dict(help="string formulation"),
     )

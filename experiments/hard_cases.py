@@ -388,6 +388,11 @@ def tandem_cases(quick):
 # Resumable CSV
 
 
+def _cell(value):
+    """A key column's text: numbers in the shortest form (`1e+06`)."""
+    return f"{value:g}" if isinstance(value, float) else value
+
+
 def _key(row):
     return tuple(str(row.get(c, "")) for c in KEY)
 
@@ -454,15 +459,8 @@ def run_pendulum(appender, done, ks, formulations, starts, solvers, EAs, t1, max
                     compiled = None
                     for EA in EAs:
                         for alpha in ALPHAS:
-                            key = dict(
-                                family="pendulum",
-                                k=k,
-                                formulation=form,
-                                start=start,
-                                solver=solver,
-                                EA=f"{EA:g}",
-                                alpha=f"{alpha:g}",
-                            )
+                            case = ("pendulum", k, form, start, solver, EA, alpha)
+                            key = dict(zip(KEY, map(_cell, case)))
                             if _key(key) in done:
                                 continue
                             sc = pendulum_scene(form, start, k, EA, alpha, t1)
@@ -821,7 +819,6 @@ def main(
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         lists={
             "k": int,
             "families": str,

@@ -812,7 +812,6 @@ def main(quick=False, repeats=None, gradients=False, identify=False, chain_study
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         gradients={"action": "store_true", "help": "the gradient check only"},
         identify={"action": "store_true", "help": "the Cd, EA identification only"},
         chain_study={"action": "store_true", "flag": "chain-study",

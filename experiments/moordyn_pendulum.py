@@ -285,4 +285,4 @@ def main(quick=False, solvers=None, tols=None, repeats=None, cfls=None):
 
 
 if __name__ == "__main__":
-    common.run_study(main, __doc__)
+    common.run_study(main)

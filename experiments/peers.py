@@ -44,6 +44,9 @@ import numpy as np
 
 
 FORMULATIONS = ("displacement", "natural", "angle")
+# Gravity (m/s^2) and the tether paper's water density (Table 1, kg/m^3).
+G = 9.81
+RHO_TABLE1 = 1024.0
 
 _jit = numba.njit(cache=True, fastmath=False)
 
@@ -403,7 +406,7 @@ def make_rhs(
     l: float = 1.0,
     mu: float = 1.0,
     m_s: float = 1.0,
-    g: float = 9.81,
+    g: float = G,
     slack: bool = False,
 ) -> Peer:
     """The string pendulum in `formulation` ("displacement", "natural" = (eps, t),
@@ -477,10 +480,10 @@ def make_tether(
     N: int = 101,
     L: float = 100.0,
     d: float = 0.01,
-    rho: float = 1024.0,
+    rho: float = RHO_TABLE1,
     mass_per_length=None,
     added_mass: float = 1.0,
-    g: float = 9.81,
+    g: float = G,
     k_s: float = 4e5,
     c_s: float = 0.0,
     c_t: float = 0.1,

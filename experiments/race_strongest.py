@@ -600,7 +600,6 @@ if __name__ == "__main__":
         sys.exit(0)
     common.run_study(
         main,
-        __doc__,
         lists={**common.PENDULUM_LISTS, "targets": float, "scipy": str},
         no_callback=dict(action="store_true", help="leave out CVODE on JAX callbacks"),
         out_name=dict(flag="name", default="", help="variant: race_strongest_<name>.*"),

@@ -239,7 +239,6 @@ def main(
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         lists={"ks": int, "solvers": str, "peers": str},
         formulation=dict(help="string formulation"),
         out_name=dict(

@@ -386,7 +386,6 @@ if __name__ == "__main__":
 
     run_study(
         main,
-        __doc__,
         k=dict(type=int, default=None, help="elements (default 40; quick 10)"),
         k_large=dict(type=int, default=None, help="also this k, smoothed law only"),
         smoothing=dict(type=float, default=None, help="eps_s (default 1e-7)"),

@@ -139,7 +139,6 @@ def main(quick=False, ks=None, members=None, solver="bdf", tols=None,
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         lists={"ks": int, "tols": float},
         members=dict(type=int, default=None),
         solver=dict(),

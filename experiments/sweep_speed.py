@@ -444,7 +444,6 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         failure_only=dict(
             flag="failure-only",
             action="store_true",

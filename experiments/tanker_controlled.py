@@ -210,7 +210,6 @@ def main(quick=False, mismatch=False):
 if __name__ == "__main__":
     run_study(
         main,
-        __doc__,
         mismatch=dict(
             action="store_true",
             help="only the model-mismatch study, without and with integral action",

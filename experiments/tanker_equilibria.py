@@ -192,4 +192,4 @@ def main(quick=False, repeats=None, methods=False):
 
 
 if __name__ == "__main__":
-    run_study(main, __doc__, methods=dict(action="store_true", help="compare solvers"))
+    run_study(main, methods=dict(action="store_true", help="compare solvers"))

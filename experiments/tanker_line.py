@@ -333,7 +333,6 @@ def main(quick=False, controlled=False):
 if __name__ == "__main__":
     run_study(
         main,
-        __doc__,
         controlled=dict(
             action="store_true", help="only part 3: the S4 scenes with the line"
         ),

@@ -237,7 +237,6 @@ def _plot(rows, formulations, EAs, tag):
 if __name__ == "__main__":
     common.run_study(
         main,
-        __doc__,
         lists={**common.PENDULUM_LISTS, "tols": float, "peers": str},
         out_name=dict(
             flag="name",

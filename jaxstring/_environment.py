@@ -20,6 +20,12 @@ from ._validate import (
 )
 
 
+# Gravity of the papers and specs (m/s^2) and sea-water density (kg/m^3, the tandem
+# spec): the defaults of `Environment` and of every scene that takes them.
+G = 9.81
+RHO_SEA_WATER = 1025.0
+
+
 def _f64(x):
     return jnp.asarray(x, dtype=jnp.float64)
 
@@ -141,8 +147,8 @@ class Environment(eqx.Module):
     - `wind`: the air velocity field at the surface, or None for no wind.
     """
 
-    g: Float[Array, ""] = eqx.field(converter=_f64, default=9.81)
-    rho_water: Float[Array, ""] = eqx.field(converter=_f64, default=1025.0)
+    g: Float[Array, ""] = eqx.field(converter=_f64, default=G)
+    rho_water: Float[Array, ""] = eqx.field(converter=_f64, default=RHO_SEA_WATER)
     rho_air: Float[Array, ""] = eqx.field(converter=_f64, default=1.225)
     nu_water: Float[Array, ""] = eqx.field(converter=_f64, default=1.0e-6)
     current: AbstractFlow | None = None

@@ -2,7 +2,7 @@
 
 import math
 
-from .._environment import Environment
+from .._environment import Environment, G
 from .._scene import Scene
 from .._validate import (
     check_angle,
@@ -36,7 +36,7 @@ def string_pendulum(
     l: float = 1.0,
     mu: float = 1.0,
     m_s: float = 1.0,
-    g: float = 9.81,
+    g: float = G,
     theta0: float = math.pi / 2,
     t1: float = 2.0,
     dim: int = 2,

@@ -37,6 +37,8 @@ from .._validate import check_finite, check_int, check_positive
 from ..tether.effects import AbstractTetherLoad, Buoyancy, Drag, Weight
 from ..tether.models import AbstractTether, CoupledEnd, EndKinematics, LmsTether
 from .vessels import (
+    HAWSER_K_H,
+    HAWSER_L0,
     AbstractActuator,
     AbstractVesselLoad,
     Hawser,
@@ -252,8 +254,8 @@ class TandemLine(AbstractModel):
 
 
 def hawser_line(
-    l0=80.0,
-    k_h=2.0e5,
+    l0: float = HAWSER_L0,
+    k_h: float = HAWSER_K_H,
     N=8,
     d=0.16,
     mass_per_length=25.0,

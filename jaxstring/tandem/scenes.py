@@ -16,6 +16,8 @@ from .._validate import check_choice, check_finite, check_nonnegative, check_pos
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
 from .line import HAWSER_KINDS, LINE_OPTIONS, with_line
 from .vessels import (
+    HAWSER_K_H,
+    HAWSER_L0,
     AbstractVesselLoad,
     ConstantThrust,
     Hawser,
@@ -168,7 +170,7 @@ def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None):
 
 
 def tandem_equilibria(
-    V_w=0.0, Delta_w_deg=0.0, U_c=1.0, l0=80.0, k_h=2.0e5, x_t=None, t1=1.0e4
+    V_w=0.0, Delta_w_deg=0.0, U_c=1.0, l0=HAWSER_L0, k_h=HAWSER_K_H, x_t=None, t1=1.0e4
 ) -> Scene:
     """S1/S2: the tandem in current and wind, no thrust; `y0` is the aligned
     state (exact equilibrium for the current alone or wind along it). Use
@@ -215,8 +217,8 @@ def tandem_fishtail(
     perturbation_deg=2.5,
     t1=60000.0,
     U_c=1.0,
-    l0=80.0,
-    k_h=2.0e5,
+    l0: float = HAWSER_L0,
+    k_h: float = HAWSER_K_H,
     hawser="massless",
     line_options=None,
 ) -> Scene:

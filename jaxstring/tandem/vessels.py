@@ -419,6 +419,11 @@ class OCIMFWind(AbstractVesselLoad):
         return jnp.stack([q * h.A_F * CX, q * h.A_L * CY, q * h.A_L * h.L * CN])
 
 
+# The spec's hawser: unstretched length (m) and small-stretch stiffness (N/m).
+HAWSER_L0 = 80.0
+HAWSER_K_H = 2.0e5
+
+
 class Hawser(AbstractVesselLoad):
     """Tension-only nonlinear hawser from the FPSO stern to the shuttle bow (3.3).
 
@@ -429,8 +434,8 @@ class Hawser(AbstractVesselLoad):
     length, m), `s` (slack smoothing length, m), `c_h` (damping, N s/m, >= 0).
     """
 
-    l0: Float[Array, ""] = _param(80.0)
-    k_h: Float[Array, ""] = _param(2.0e5)
+    l0: Float[Array, ""] = _param(HAWSER_L0)
+    k_h: Float[Array, ""] = _param(HAWSER_K_H)
     delta_h: Float[Array, ""] = _param(10.0)
     s: Float[Array, ""] = _param(0.05)
     c_h: Float[Array, ""] = _param(0.0)

@@ -41,7 +41,7 @@ Choices the paper leaves open (stated here so that they can be changed):
 import jax.numpy as jnp
 import numpy as np
 
-from .._environment import Environment, UniformCurrent
+from .._environment import Environment, G, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_int, check_nonnegative, check_positive
 from .effects import Buoyancy, Drag, Weight
@@ -57,6 +57,8 @@ from .models import (
 TANGENTIAL_AREAS = ("projected", "wetted")
 
 
+# The paper's water density (Table 1), kg/m^3.
+RHO_TABLE1 = 1024.0
 PAPER_TIMES = (0.0, 10.0, 35.0, 45.0, 70.0)
 PAPER_FAST_PATH = (
     (0.0, 0.0, -50.0),
@@ -80,7 +82,7 @@ def tether_fixed(
     N: int = 101,
     L: float = 100.0,
     d: float = 0.01,
-    rho: float = 1024.0,
+    rho: float = RHO_TABLE1,
     c_n: float = 1.0,
     c_t: float = 0.1,
     c_l: float = 0.0,
@@ -88,7 +90,7 @@ def tether_fixed(
     T1: float = 0.025,
     k: float = 1e4,
     current=(-1.0, 0.0, 0.0),
-    g: float = 9.81,
+    g: float = G,
     added_mass: float = 1.0,
     t1: float = 70.0,
     times=PAPER_TIMES,
@@ -230,7 +232,7 @@ def tether_fold(
     L: float = 10.0,
     d: float = 0.01,
     mass_per_length: float = 0.5,
-    rho: float = 1024.0,
+    rho: float = RHO_TABLE1,
     t1: float = 1.0,
     **model_options,
 ) -> Scene:
