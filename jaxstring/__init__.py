@@ -13,11 +13,13 @@ from . import (
 from ._config import enable_compilation_cache as enable_compilation_cache
 from ._effect import AbstractEffect as AbstractEffect, AbstractLoad as AbstractLoad
 from ._environment import (
+    RHO_SEA_WATER as RHO_SEA_WATER,
     AbstractCurrent as AbstractCurrent,
     AbstractFlow as AbstractFlow,
     DepthProfileCurrent as DepthProfileCurrent,
     Environment as Environment,
     FunctionCurrent as FunctionCurrent,
+    G as G,
     UniformCurrent as UniformCurrent,
 )
 from ._fit import (

@@ -39,6 +39,8 @@ from .scenes import (
     with_model_mismatch as with_model_mismatch,
 )
 from .vessels import (
+    HAWSER_K_H as HAWSER_K_H,
+    HAWSER_L0 as HAWSER_L0,
     AbstractActuator as AbstractActuator,
     AbstractVesselLoad as AbstractVesselLoad,
     ConstantThrust as ConstantThrust,

@@ -30,6 +30,7 @@ from .models import (
     hanging_state as hanging_state,
 )
 from .scenes import (
+    RHO_TABLE1 as RHO_TABLE1,
     tether_fixed as tether_fixed,
     tether_fold as tether_fold,
     tether_winch as tether_winch,
