@@ -266,7 +266,8 @@ def simulate(
       string), project the state onto it after every step and at the save times
       (default True); False integrates the raw constrained equations, to show drift.
     - `step_control`: `"auto"` (default), `"pid"` or `"newton-limited"`: the
-      adaptive step-size controller. `"auto"` is diffrax's `PIDController`, except
+      adaptive step-size controller. `"auto"` is diffrax's `PIDController` (for
+      Rodas5P with the step growth capped at 3x per step), except
       for the Newton-stage solvers (Kvaerno, adaptive implicit Euler), which get
       `NewtonLimitedController`: a PID controller that, after a failed stage
       Newton iteration, halves the step and caps it just below the failed size
