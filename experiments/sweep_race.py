@@ -6,7 +6,9 @@ and 40), 64 Kelvin-Voigt constants alpha in [0.005, 0.05] s. The peer: CVODE BDF
 numba right-hand side, analytic banded Jacobian, band linear solver
 (experiments/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
 jaxstring: `sweep` (`--mode` vmap or lockstep, groups of `--group` sorted by alpha,
-two CPU devices: the script sets `--xla_force_host_platform_device_count=2`) with
+on every device of JAX's default backend: the script sets
+`--xla_force_host_platform_device_count=2`, whose two CPU devices run their shards
+one after the other; a GPU runs the whole sweep) with
 `--solver` (BDF, vmap mode only; Kvaerno5 also lockstep) at the loosest of `--tols`
 at which every member is as accurate as CVODE's least accurate member.
 Error: the largest end-mass distance at 0.5, 1, 1.5, 2 s from CVODE-numba at

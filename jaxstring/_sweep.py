@@ -11,14 +11,14 @@ until the slowest is done -- so the cost is (largest number of steps) x (members
 against the sum of the steps for a loop. What helps (measured in
 experiments/sweep_speed.py):
 
-* sharding: with several devices (``XLA_FLAGS=--xla_force_host_platform_device_count=2``
-  makes one per CPU core), the members are split into one shard per device, each
-  committed to its device and dispatched from its own thread (XLA:CPU runs a
-  call's solver loops in the dispatching thread, so one thread would run the
-  shards one after the other): each device runs its own solver loop, with no
-  synchronisation between devices. Measured (k = 20 pendulum, 64 members, fixed-step
-  implicit Euler, groups of 16): 2 devices 1.2 s against 2.3 s on one; the wall
-  time halves, the CPU time stays. (`jax.shard_map` would be
+* sharding: with several devices the members are split into one shard per
+  device, each committed to its device, so that each device runs its own solver
+  loop, with no synchronisation between devices. The shards are dispatched
+  asynchronously from the calling thread: GPUs run them at the same time, while
+  XLA:CPU runs a call's solver loops in the dispatching thread, so the CPU devices
+  of ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` run theirs one after the
+  other (a thread per device ran them at the same time, but deadlocked inside
+  XLA:CPU on vmapped BDF groups of 8 members or more). (`jax.shard_map` would be
   the one-program form, but lineax's structure check fails on the manual-mesh
   shapes inside it, and a jit over `NamedSharding` inputs turns the batched loop
   predicate into a cross-device reduction every step.)
@@ -32,8 +32,8 @@ experiments/sweep_speed.py):
 * vmap with BDF: the displacement string's BDF step has no branch (a fresh
   Jacobian every step), so vmap computes nothing twice, and a step at k = 20-40 is
   a few hundred kernel launches that cost about the same for 16 members as for
-  one: 64 members in groups of 16 on two CPU devices ran 6.8-9.3x faster than 64
-  CVODE-numba runs (`experiments/sweep_race.py`).
+  one: 64 members in groups of 16 ran 4.5-6.3x faster than 64 CVODE-numba runs
+  in wall time (k = 40 and 20, `experiments/sweep_race.py`).
 * lockstep (`mode="lockstep"`), the fast one for the Kvaerno and fixed-step
   solvers: what costs in a vmapped solve is less
   the lockstep itself than what vmap makes of the solver's control flow: every
@@ -72,7 +72,6 @@ arithmetic at a few ns per flop whatever the layout (a members-last variant unde
 `jax.custom_batching.custom_vmap` was no faster and was dropped).
 """
 
-import concurrent.futures
 import copy
 import dataclasses
 import math
@@ -372,28 +371,25 @@ def _lockstep(vals, scene, getters, fn, config, ts):
 
 
 def _sweep_devices(local, vals, scene, getters, fn, config, ts, batch_size, devices):
-    """Split the members over `devices` and run the shards concurrently.
+    """Split the members over `devices`, one shard each, and run the shards.
 
-    Each shard is committed to its device (`jax.device_put`); JAX dispatches the
-    calls asynchronously, so the devices (CPU cores with
-    ``--xla_force_host_platform_device_count``) integrate their shards at the same
-    time, each with its own solver loop (no lockstep across devices).
+    Each shard is committed to its device (`jax.device_put`) and dispatched from
+    the calling thread; JAX dispatches asynchronously, so devices that run their
+    programs asynchronously (GPUs) integrate their shards at the same time. XLA:CPU
+    runs a call's solver loops in the dispatching thread, so CPU devices run their
+    shards one after the other. (One dispatching thread per CPU device ran them at
+    the same time, but a vmapped BDF solve, groups of 8 members or more, then
+    deadlocked inside XLA:CPU on its second call: both threads waiting for their
+    executions while every XLA worker thread sat idle.)
     """
     n_dev = len(devices)
     size = vals[0].shape[0] // n_dev
-
-    def shard(i):
-        dev = devices[i]
+    outs = []
+    for i, dev in enumerate(devices):
         part = tuple(jax.device_put(v[i * size : (i + 1) * size], dev) for v in vals)
         sc, t = jax.device_put((scene, ts), dev)
-        return jax.block_until_ready(
-            local(part, sc, getters, fn, config, t, batch_size)
-        )
-
-    # One thread per device: XLA:CPU runs a call's solver loops in the thread that
-    # dispatched it, so calls dispatched from one thread run one after the other.
-    with concurrent.futures.ThreadPoolExecutor(n_dev) as pool:
-        outs = list(pool.map(shard, range(n_dev)))
+        outs.append(local(part, sc, getters, fn, config, t, batch_size))
+    outs = jax.block_until_ready(outs)
     return jtu.tree_map(lambda *xs: np.concatenate([np.asarray(x) for x in xs]), *outs)
 
 

@@ -107,6 +107,38 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
     assert float(out.stdout.strip().splitlines()[-1]) < 1e-12
 
 
+def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
+    # Two devices, one dispatching thread each, vmapped BDF groups of 16: the
+    # second call of the same compiled sweep once deadlocked inside XLA:CPU
+    # (its concurrency-optimised scheduler); every call must finish and equal the
+    # one-device sweep.
+    code = textwrap.dedent(
+        """
+        import numpy as np, jax
+        import jaxstring as js
+        from jaxstring._sweep import sweep
+        assert len(jax.devices()) == 2
+        base = js.scenes.string_pendulum(k=8, EA=1e6, t1=0.2)
+        fn = lambda traj, s: traj.obs["positions"][:, -1, :]
+        kw = dict(solver="bdf", rtol=1e-6, atol=1e-6, n_save=5, batch_size=16)
+        v = {"alpha": np.linspace(0.005, 0.05, 32)}
+        one = np.asarray(sweep(base, v, fn, devices=1, **kw).out)
+        for _ in range(3):
+            two = sweep(base, v, fn, **kw)
+            assert two.n_devices == 2 and bool(np.all(two.ok))
+            print(float(np.max(np.abs(np.asarray(two.out) - one))))
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True,
+        timeout=240,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    diffs = [float(x) for x in out.stdout.split()]
+    assert len(diffs) == 3 and max(diffs) < 1e-12, diffs
+
+
 def _pendulum(formulation="displacement", **kw):
     return js.scenes.string_pendulum(formulation=formulation, k=3, t1=0.3, **kw)
 
