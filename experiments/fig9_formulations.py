@@ -86,16 +86,21 @@ def _jaxstring_code(scene, name, ts, tol):
     return Code(name, "jaxstring", call)
 
 
+def _peer_result(out, end_mass):
+    """A peer solve's outcome as a row: status, end-mass positions, call counts."""
+    return {
+        "ok": out["ok"],
+        "end": end_mass(out["ys"]) if out["ok"] else None,
+        "status": "success" if out["ok"] else out["message"][:120],
+        "nfev": out["nfev"],
+        "njev": out["njev"],
+    }
+
+
 def _cvode_code(peer, y0, ts, tol, jac):
     def call():
         out = peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac)
-        return {
-            "ok": out["ok"],
-            "end": peer.end_mass(out["ys"]) if out["ok"] else None,
-            "status": "success" if out["ok"] else out["message"][:120],
-            "nfev": out["nfev"],
-            "njev": out["njev"],
-        }
+        return _peer_result(out, peer.end_mass)
 
     tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
     return Code(f"{CVODE} [{tag}]", "cvode", call, warmup=peer.warmup)
@@ -108,13 +113,7 @@ def _callback_code(scene, ts, tol, max_fev):
 
     def call():
         out = references.solve(rhs, "ida", ts, tol, tol, "jax-band")
-        return {
-            "ok": out["ok"],
-            "end": rhs.end_mass(out["ys"]) if out["ok"] else None,
-            "status": "success" if out["ok"] else out["message"][:120],
-            "nfev": out["nfev"],
-            "njev": out["njev"],
-        }
+        return _peer_result(out, rhs.end_mass)
 
     return Code(f"{CALLBACK} [band Jacobian]", "callback", call, warmup=rhs.compile)
 
