@@ -396,10 +396,10 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
             "over all members and save times; err_vs_ref: max end-mass distance to "
             f"Kvaerno5 at rtol=atol=1e-10 on members {ref_idx.tolist()} (m).",
             "meets_goal: diff_vs_loop <= 1e-10 and wall-clock speedup "
-            ">= 3, all members ok. The CPU-time ratio is the work saved; with 2 "
-            "devices the wall ratio also counts the second core (one thread per "
-            "device), which the loop does not use except through XLA's own "
-            "threads (YNNPACK's, in the adaptive loop).",
+            ">= 3, all members ok. The CPU-time ratio is the work saved. `2 "
+            "devices`: the members split over two CPU devices, whose shards "
+            "XLA:CPU runs one after the other (each dispatched from the calling "
+            "thread).",
             load,
         ],
     )

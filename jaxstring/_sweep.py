@@ -590,6 +590,7 @@ def sweep(
       members (default: `n_save` points over the base scene's span).
     - `devices`: `"auto"` (all devices of the default backend), a list of devices, or
       1 / None (no sharding). Members are padded to a multiple of the device count.
+      GPUs run their shards at the same time; XLA:CPU devices one after the other.
     - `batch_size`: run members in groups of this size (vmap inside `lax.map`);
       None: all members of a device in one vmap.
     - `order`: `"given"`, or `"sort"` to group members by their parameter values
@@ -618,9 +619,8 @@ def sweep(
       fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
       Compiled without YNNPACK fusions, on a quiet machine, with Newton started
       from the previous step's increment (in the loop and the sweep alike):
-      fixed-step vmap in groups of 16 1.7x on one device and 3.1x in wall time on
-      two (`devices="auto"` with two CPU devices; 2.9-3.5x in ten runs), equal to
-      the loop to 2e-15; groups of 8 on two devices were about 5 % faster than 16.
+      fixed-step vmap in groups of 16 1.7-1.9x, equal to the loop to 2e-15 (on
+      two CPU devices the same: XLA:CPU runs their shards one after the other).
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
       its own status and the others are intact (`SweepResult.mode` says so).
