@@ -191,12 +191,15 @@ def main(
     start="release",
     peers=None,
     rounds=0,
+    note="",
 ):
     """Run the k-scaling study; return (rows, exponents).
 
     `peers`: "cvode-numba" (the main peer) and names of experiments/references.py
     (CVODE, IDA, scipy on jaxstring's JAX functions through callbacks); default
     cvode-numba and cvode-BDF (quick: cvode-numba).
+
+    `note`: one more note for both tables (e.g. why the k stop where they do).
 
     `rounds` > 0: after the sequential pass (which compiles every k and picks the
     solver), time the best jaxstring solver and CVODE-numba again in `rounds`
@@ -334,6 +337,7 @@ def main(
         f"Run time vs k, {formulation}, {start} start, EA={EA:g}, alpha={ALPHA:g} s, "
         f"t1={t1} s, rtol=atol={tol:g}",
         notes=[
+            *([note] if note else []),
             *([ratio_note] if ratio_note else []),
             f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
             "numba right-hand side of experiments/peers.py (analytic band Jacobian "
@@ -368,6 +372,7 @@ def main(
         f"Fitted exponent p of run time ~ k^p (the paper: about 2), {formulation}, "
         f"start={start}, rtol=atol={tol:g}",
         notes=[
+            *([note] if note else []),
             *([ratio_note] if ratio_note else []),
             "exponent: the fit of wall time over k_range, exponent_cpu of process "
             "CPU time, exponent_upper_half of wall time over the upper half of the "
@@ -437,4 +442,5 @@ if __name__ == "__main__":
         budget_s=dict(flag="budget"),
         tol=dict(help="rtol = atol"),
         rounds=dict(help="re-time in interleaved rounds"),
+        note=dict(help="one more note for the tables"),
     )
