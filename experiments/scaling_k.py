@@ -1,12 +1,16 @@
 """Cost vs number of elements k at EA = 1e6, with the fitted exponent.
 
-Question: how does wall time grow with k = 10 ... 640 (the paper reports about k^2)
-for the best jaxstring solver and for CVODE on the identical right-hand side (with
-the JAX Jacobian in band form, so CVODE's band LU costs O(k) per factorisation)?
-The best jaxstring solver is the fastest implicit adaptive one at the second k
-(every candidate runs at the first two k). A configuration stops growing k when one
-run takes longer than the budget. Settings: (eps, phi) by default, 2 s,
-rtol = atol = 1e-7.
+Question: how does run time grow with k = 10 ... 640 (the paper reports about k^2)
+for the best jaxstring solver and for CVODE as an expert sets it up? The main peer
+is CVODE-numba (experiments/peers.py): the same equations in numba, CVODE BDF with
+the band linear solver and the analytic band Jacobian (displacement variables) or
+CVODE's band difference quotients ((eps, phi) variables). CVODE driving jaxstring's
+own JAX functions through Python callbacks (experiments/references.py, band
+Jacobian from JAX) is a second, labelled row. The best jaxstring solver is the
+fastest implicit adaptive one at the second k (every candidate runs at the first
+two k). A configuration stops growing k when one run takes longer than the budget.
+Settings: (eps, phi) by default, 2 s, alpha = 0.01 s, rtol = atol = 1e-7 for every
+code; every code starts from jaxstring's initial state of the scene.
 
 Two starts (``--start``):
 
@@ -20,16 +24,25 @@ Two starts (``--start``):
   mesh-scale features, so the steps should not grow with k, and the exponent
   measures the cost per step.
 
+Times: wall (``run_s``) and process CPU, all threads (``cpu_s``), the median of
+``--repeats`` runs after a first, untimed call (jaxstring's compile, numba's compile
+or cache load, JAX's jit of the callback functions: ``compile_s``, apart). With
+``--rounds N`` the best jaxstring solver and CVODE-numba are timed again in N
+interleaved rounds (see ``main``). ``x_cvode_wall``, ``x_cvode_cpu``: a run's time
+over CVODE-numba's at the same k.
+
 Run: ``python experiments/scaling_k.py [--quick] [--formulation displacement]
-[--start swing] [--peers cvode-BDF] [--rounds 3] [--tol 1e-6]`` (``--rounds``:
-re-time the jaxstring runs in interleaved rounds, see ``main``).
+[--start swing] [--peers cvode-numba,cvode-BDF] [--rounds 3] [--tol 1e-6]``
+(``--peers``: ``cvode-numba`` and the names of experiments/references.py, run on
+JAX callbacks; ``none``: jaxstring alone).
 """
 
+import importlib.util
 import math
+import statistics
 import time
 
 import _common as common
-import jax
 import numpy as np
 import references
 
@@ -37,6 +50,9 @@ import jaxstring
 
 
 KS = (10, 20, 40, 80, 160, 320, 640)
+ALPHA = 0.01  # Kelvin-Voigt damping (s), the scene's default, given to the peers
+CVODE = "CVODE-numba"
+NUMBA_PEER = "cvode-numba"
 
 
 def swing_state(k, EA, l=1.0, mu=1.0, m_s=1.0, g=9.81):
@@ -56,6 +72,112 @@ def fit_exponent(ks, times):
     return float(np.polyfit(np.log(ks), np.log(times), 1)[0])
 
 
+def _clock(fn):
+    """(result, wall s, process CPU s) of one call."""
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
+class Code:
+    """One contender at one k: `call()` runs it once and returns a dict with `ok`,
+    `end` (end-mass positions at the save times, or None), `status` and counts;
+    `warmup()` (peers) compiles and returns its seconds."""
+
+    def __init__(self, label, kind, call, warmup=None):
+        self.label, self.kind, self.call, self.warmup = label, kind, call, warmup
+
+
+def _jaxstring_code(scene, name, ts, tol):
+    def call():
+        try:
+            traj = common.block(
+                jaxstring.simulate(
+                    scene, name, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
+                )
+            )
+        except Exception as e:  # a solver that cannot run is a result, not a crash
+            return {"ok": False, "end": None, "status": f"{type(e).__name__}: {e}"}
+        return {
+            "ok": bool(traj.ok),
+            "end": np.asarray(traj.end_mass) if traj.ok else None,
+            "status": traj.status,
+            **common.stats_dict(traj),
+        }
+
+    return Code(name, "jaxstring", call)
+
+
+def _peer_result(out, end_mass):
+    return {
+        "ok": out["ok"],
+        "end": end_mass(out["ys"]) if out["ok"] else None,
+        "status": "success" if out["ok"] else out["message"][:120],
+        "nfev": out["nfev"],
+        "njev": out["njev"],
+    }
+
+
+def _numba_code(formulation, k, EA, y0, ts, tol):
+    import peers
+
+    peer = peers.make_rhs(formulation, k, EA, alpha=ALPHA)
+    jac = "analytic" if peer.jac is not None else "dq"
+
+    def call():
+        return _peer_result(peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac),
+                            peer.end_mass)  # fmt: skip
+
+    tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
+    return Code(f"{CVODE} [{tag}]", "cvode", call, warmup=peer.warmup)
+
+
+def _callback_code(scene, name, ts, tol):
+    rhs = references.JaxRHS(scene)
+
+    def call():
+        out = references.solve(rhs, name, ts, tol, tol, "jax-band")
+        return _peer_result(out, rhs.end_mass)
+
+    return Code(f"{name} on JAX callbacks [band Jacobian]", "callback", call,
+                warmup=rhs.compile)  # fmt: skip
+
+
+def measure(code, repeats, long_run_s=common.LONG_RUN_S):
+    """One first call (or the peer's warm-up and a first call), then `repeats` timed
+    runs (one where the first took longer than `long_run_s`). Returns the last
+    run's dict with `run_s`, `cpu_s` (medians), `repeats`, `compile_s`, and the
+    lists `walls`, `cpus`."""
+    warm = code.warmup() if code.warmup is not None else None
+    out, first, _ = _clock(code.call)
+    walls, cpus = [], []
+    if out["ok"]:
+        for i in range(max(repeats, 1)):
+            out, w, c = _clock(code.call)
+            walls.append(w)
+            cpus.append(c)
+            if i == 0 and w > long_run_s:
+                break
+    else:
+        walls, cpus = [first], [math.nan]
+    r = dict(out)
+    r.update(
+        run_s=statistics.median(walls),
+        cpu_s=statistics.median(cpus),
+        repeats=len(walls) if out["ok"] else 0,
+        # jaxstring: first call minus the median run; the peers: their warm-up.
+        compile_s=max(first - statistics.median(walls), 0.0) if warm is None else warm,
+    )
+    return r
+
+
+def _ratio(rows, k, field, r):
+    cv = [x for x in rows if x["k"] == k and x["solver"].startswith(CVODE)]
+    if not cv or not cv[0]["ok"] or not r["ok"]:
+        return math.nan
+    return r[field] / cv[0][field]
+
+
 def main(
     quick=False,
     formulation="angle",
@@ -69,14 +191,22 @@ def main(
     start="release",
     peers=None,
     rounds=0,
+    note="",
 ):
     """Run the k-scaling study; return (rows, exponents).
 
+    `peers`: "cvode-numba" (the main peer) and names of experiments/references.py
+    (CVODE, IDA, scipy on jaxstring's JAX functions through callbacks); default
+    cvode-numba and cvode-BDF (quick: cvode-numba).
+
+    `note`: one more note for both tables (e.g. why the k stop where they do).
+
     `rounds` > 0: after the sequential pass (which compiles every k and picks the
-    solver), time every jaxstring run again in `rounds` interleaved rounds (each
-    round runs every k once, k = 40 ... 1280, then again) and report the median over
-    the rounds. A shared machine's slow phases then fall on all k alike instead of
-    on whichever k was running, which moves a fitted exponent by up to 0.1 here.
+    solver), time the best jaxstring solver and CVODE-numba again in `rounds`
+    interleaved rounds (each round runs every k once, k = 40 ... 1280, jaxstring
+    then CVODE-numba, then again) and report the medians over the rounds. A shared
+    machine's slow phases then fall on all k and both codes alike instead of on
+    whichever ran at the time, which moves a fitted exponent by up to 0.1 here.
     """
     common.set_quick(quick)
     ks = ks or ((4, 8) if quick else KS)
@@ -92,67 +222,81 @@ def main(
         raise ValueError("start='swing' is built for formulation='displacement'")
     avail = references.available()
     if peers is None:
-        peers = ["cvode-BDF"] + ([] if quick else ["scipy-Radau"])
-    peers = [(p, "jax-band") for p in peers if avail.get(p)]
+        numba_ok = all(importlib.util.find_spec(m) for m in ("numba", "sksundae"))
+        peers = [NUMBA_PEER] * numba_ok + ([] if quick else ["cvode-BDF"])
+    use_numba = NUMBA_PEER in peers
+    callbacks = [p for p in peers if p != NUMBA_PEER and avail.get(p)]
     ts = np.linspace(0.0, t1, 41)
     rows = []
-    timed_again = []  # (row, scene, solver) of the jaxstring runs, for `rounds`
-    active = list(candidates) + [f"{p} [{j}]" for p, j in peers]
+    again = {}  # k -> [(row, code)] of the runs to re-time in `rounds`
+    active = list(candidates) + ([CVODE] if use_numba else []) + callbacks
     best = None
     for i, k in enumerate(ks):
         y0 = swing_state(k, EA) if start == "swing" else None
         scene = jaxstring.scenes.string_pendulum(
-            formulation=formulation, k=k, EA=EA, t1=t1, y0=y0
+            formulation=formulation, k=k, EA=EA, alpha=ALPHA, t1=t1, y0=y0
         )
-        rhs = references.JaxRHS(scene)
-        ref = None
-        for name in list(active):
-            if "[" in name:
-                p, j = name.split(" [")
-                r = common.run_peer(
-                    rhs, p, j.rstrip("]"), ts, rtol=tol, atol=tol, repeats=repeats
-                )
+        y0_flat = np.ravel(np.asarray(scene.y0, dtype=np.float64))
+        codes = []
+        for name in active:
+            if name == CVODE:
+                codes.append(_numba_code(formulation, k, EA, y0_flat, ts, tol))
+            elif name in callbacks:
+                codes.append(_callback_code(scene, name, ts, tol))
             else:
-                r = common.run_jaxstring(
-                    scene, name, ts, rtol=tol, atol=tol, repeats=repeats
-                )
-                timed_again.append((r, scene, name))
-            end = r.pop("end")
-            if ref is None and r["ok"]:
-                ref = end
-            r.update(
-                k=k,
-                n_states=int(scene.y0.size),
-                diff_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
-            )
+                codes.append(_jaxstring_code(scene, name, ts, tol))
+        here = []
+        for name, code in zip(list(active), codes):
+            r = measure(code, repeats)
+            r.update(solver=code.label, kind=code.kind, k=k,
+                     n_states=int(scene.y0.size))  # fmt: skip
             rows.append(r)
-            print(f"k={k} {name}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
+            here.append(r)
+            again.setdefault(k, []).append((r, code))
+            print(f"k={k} {code.label}: {r['run_s']:.3g} s wall, {r['cpu_s']:.3g} s "
+                  f"CPU, ok={r['ok']}", flush=True)  # fmt: skip
             if not r["ok"] or r["run_s"] > budget_s:
                 active.remove(name)
+        # diff_m: the distance to CVODE-numba (else to the first successful run)
+        ref = [r for r in here if r["ok"] and r["kind"] == "cvode"]
+        ref = ref or [r for r in here if r["ok"]]
+        for r in here:
+            r["diff_m"] = (
+                common.end_mass_error(r["end"], ref[0]["end"]) if r["ok"] else math.nan
+            )
         if i == min(1, len(ks) - 1):
             # keep only the fastest jaxstring candidate from here on
-            js = [r for r in rows if r["k"] == k and r["ok"] and "[" not in r["solver"]]
+            js = [r for r in here if r["ok"] and r["kind"] == "jaxstring"]
             if js:
                 best = min(js, key=lambda r: r["run_s"])["solver"]
-            active = [a for a in active if "[" in a or a == best]
+            active = [a for a in active if a == CVODE or a in callbacks or a == best]
+    for r in rows:
+        r.pop("end")
     if rounds > 0:
-        again = [(r, sc, n) for r, sc, n in timed_again if r["ok"] and n == best]
-        runs = {id(r): [] for r, _, _ in again}
+        redo = [
+            [(r, c) for r, c in again[k]
+             if r["ok"] and (c.label == best or c.kind == "cvode")]
+            for k in ks if k in again
+        ]  # fmt: skip
+        times = {id(r): ([], []) for group in redo for r, _ in group}
         for i in range(rounds):
-            for r, sc, n in again:
-                t = time.perf_counter()
-                jax.block_until_ready(
-                    jaxstring.simulate(
-                        sc, n, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
-                    ).ys
-                )
-                runs[id(r)].append(time.perf_counter() - t)
-            print(
-                f"round {i}: "
-                + ", ".join(f"{runs[id(r)][-1]:.3g}" for r, _, _ in again)
-            )
-        for r, _, _ in again:
-            r.update(run_s=float(np.median(runs[id(r)])), repeats=rounds)
+            for group in redo:
+                for r, code in group:
+                    out, w, c = _clock(code.call)
+                    times[id(r)][0].append(w)
+                    times[id(r)][1].append(c)
+                    r["ok"] = r["ok"] and out["ok"]
+            print(f"round {i}: " + ", ".join(
+                f"{r['k']} {r['kind']} {times[id(r)][0][-1]:.3g}"
+                for group in redo for r, _ in group))  # fmt: skip
+        for group in redo:
+            for r, _ in group:
+                w, c = times[id(r)]
+                r.update(run_s=statistics.median(w), cpu_s=statistics.median(c),
+                         repeats=rounds)  # fmt: skip
+    for r in rows:
+        r["x_cvode_wall"] = _ratio(rows, r["k"], "run_s", r)
+        r["x_cvode_cpu"] = _ratio(rows, r["k"], "cpu_s", r)
     exps = []
     for name in dict.fromkeys(r["solver"] for r in rows):
         ok = [r for r in rows if r["solver"] == name and r["ok"]]
@@ -165,6 +309,7 @@ def main(
                     "solver": name,
                     "k_range": f"{min(x)}-{max(x)}",
                     "exponent": fit_exponent(x, y),
+                    "exponent_cpu": fit_exponent(x, [r["cpu_s"] for r in ok]),
                     "exponent_upper_half": fit_exponent(
                         x[len(x) // 2 - 1 :], y[len(y) // 2 - 1 :]
                     )
@@ -175,37 +320,65 @@ def main(
                     "steps_exponent": fit_exponent(x, steps)
                     if None not in steps
                     else math.nan,
+                    "nfev_exponent": fit_exponent(x, [r["nfev"] for r in ok])
+                    if all(r.get("nfev") is not None for r in ok)
+                    else math.nan,
                 }
             )
     tag = ("_quick" if quick else "") + (f"_{out_name}" if out_name else "")
+    ratio_note = _ratio_note(rows, best)
     common.write_table(
         f"scaling_k{tag}",
         rows,
         (
-            "k n_states solver ok run_s repeats compile_s num_steps "
-            "num_rejected_steps nfev njev diff_m status"
+            "k n_states solver ok run_s cpu_s repeats compile_s x_cvode_wall "
+            "x_cvode_cpu num_steps num_rejected_steps nfev njev diff_m status"
         ).split(),
-        f"Wall time vs k, {formulation}, {start} start, EA={EA:g}, t1={t1} s, "
-        f"rtol=atol={tol:g}",
+        f"Run time vs k, {formulation}, {start} start, EA={EA:g}, alpha={ALPHA:g} s, "
+        f"t1={t1} s, rtol=atol={tol:g}",
         notes=[
-            "diff_m: end-mass distance to the first successful run at the same k.",
-            "run_s: median of `repeats` runs after a compile/warm-up run"
+            *([note] if note else []),
+            *([ratio_note] if ratio_note else []),
+            f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
+            "numba right-hand side of experiments/peers.py (analytic band Jacobian "
+            "in displacement variables, CVODE's band difference quotients "
+            "otherwise), from jaxstring's initial state of the scene. 'on JAX "
+            "callbacks': jaxstring's vector field and band Jacobian through "
+            "Python callbacks (experiments/references.py).",
+            f"diff_m: largest end-mass distance at the {len(ts)} save times to "
+            f"{CVODE} at the same k (to the first successful run where it failed).",
+            "run_s (wall), cpu_s (process CPU, all threads): medians of `repeats` "
+            "runs after a first, untimed call (a run over "
+            f"{common.LONG_RUN_S:g} s is timed once)"
             + (
-                f"; for jaxstring, the median over {rounds} interleaved rounds "
-                "(each round runs every k once) after all k were compiled."
+                f"; for the best jaxstring solver and {CVODE}, the medians over "
+                f"{rounds} interleaved rounds (each round runs every k once, both "
+                "codes) after all k were compiled."
                 if rounds > 0
                 else "."
-            ),
+            )
+            + " compile_s: jaxstring's first call minus the median; the peers' "
+            "numba compile or cache load, or JAX jit of the callback functions. "
+            f"x_cvode_wall, x_cvode_cpu: time / {CVODE}'s at the same k.",
         ],
     )
     common.write_table(
         f"scaling_k_exponents{tag}",
         exps,
-        "solver best k_range exponent exponent_upper_half steps_exponent".split(),
-        f"Fitted exponent p of wall time ~ k^p (the paper: about 2), start={start}",
+        (
+            "solver best k_range exponent exponent_cpu exponent_upper_half "
+            "steps_exponent nfev_exponent"
+        ).split(),
+        f"Fitted exponent p of run time ~ k^p (the paper: about 2), {formulation}, "
+        f"start={start}, rtol=atol={tol:g}",
         notes=[
-            "steps_exponent: the same fit of the accepted step count; the rest of "
-            "the exponent is the growth of the cost per step."
+            *([note] if note else []),
+            *([ratio_note] if ratio_note else []),
+            "exponent: the fit of wall time over k_range, exponent_cpu of process "
+            "CPU time, exponent_upper_half of wall time over the upper half of the "
+            "k. steps_exponent: the same fit of the accepted step count (the rest of "
+            "the exponent is the growth of the cost per step); nfev_exponent: of "
+            "the right-hand-side calls (peers).",
         ],
     )
     fig, axes = common.new_figure(1, 1, w=6)
@@ -215,10 +388,11 @@ def main(
             (r["k"], r["run_s"]) for r in rows if r["solver"] == e["solver"] and r["ok"]
         ]
         x, y = zip(*pts)
+        kind = next(r["kind"] for r in rows if r["solver"] == e["solver"])
         ax.loglog(
             x,
             y,
-            "--" if "[" in e["solver"] else "-",
+            {"jaxstring": "-", "cvode": "--"}.get(kind, ":"),
             marker="o",
             ms=3,
             color=f"C{c}",
@@ -236,6 +410,24 @@ def main(
     return rows, exps
 
 
+def _ratio_note(rows, best):
+    """The best solver's wall and CPU time over CVODE-numba's, per k (or None)."""
+    pts = [
+        r
+        for r in rows
+        if r["solver"] == best and r["ok"] and math.isfinite(r["x_cvode_wall"])
+    ]
+    if not pts:
+        return None
+    return (
+        f"{best} / {CVODE}, wall (CPU) per k: "
+        + ", ".join(
+            f"k={r['k']}: {r['x_cvode_wall']:.2g} ({r['x_cvode_cpu']:.2g})" for r in pts
+        )
+        + "."
+    )
+
+
 if __name__ == "__main__":
     common.run_study(
         main,
@@ -250,4 +442,5 @@ if __name__ == "__main__":
         budget_s=dict(flag="budget"),
         tol=dict(help="rtol = atol"),
         rounds=dict(help="re-time in interleaved rounds"),
+        note=dict(help="one more note for the tables"),
     )

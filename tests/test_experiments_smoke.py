@@ -159,6 +159,18 @@ def test_scaling_quick(results_in_tmp):
     assert all(r["ok"] for r in rows)
     assert {e["solver"] for e in exps} >= {"kvaerno5"}
     assert all(math.isfinite(e["exponent"]) for e in exps)
+    if not (HAS_NUMBA and HAS_SUNDAE):
+        return
+    # The numba peer runs at every k from the same start and lands where jaxstring
+    # does; the ratio columns are the quotient of the two runs' medians.
+    for k in (4, 8):
+        js = next(r for r in rows if r["k"] == k and r["solver"] == "kvaerno5")
+        cv = next(r for r in rows if r["k"] == k and r["solver"].startswith("CVODE"))
+        assert cv["solver"] == "CVODE-numba [band DQ Jacobian]" and cv["diff_m"] == 0
+        assert js["diff_m"] < 1e-5
+        assert js["x_cvode_wall"] == pytest.approx(js["run_s"] / cv["run_s"])
+        assert js["x_cvode_cpu"] == pytest.approx(js["cpu_s"] / cv["cpu_s"])
+    assert any(e["solver"].startswith("CVODE-numba") for e in exps)
 
 
 @pytest.mark.slow
