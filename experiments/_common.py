@@ -538,3 +538,44 @@ def fit_row(seed, res, wall, truth, sigma_name="sigma"):
         f"{res.message}"
     )
     return row
+
+
+def peer_result(out, end_mass):
+    """A peer solve's outcome (`peers.cvode_solve`, `references.solve`) as a row:
+    status, end-mass positions (`end_mass(ys)`), right-hand-side and Jacobian calls."""
+    return {
+        "ok": out["ok"],
+        "end": end_mass(out["ys"]) if out["ok"] else None,
+        "status": "success" if out["ok"] else out["message"][:120],
+        "nfev": out["nfev"],
+        "njev": out["njev"],
+    }
+
+
+def simulate_row(scene, solver, ts, tol):
+    """One `simulate` at rtol = atol = `tol` as a row: `ok`, `end` (end-mass
+    positions at `ts`, or None), `status`, the solver statistics and the accepted,
+    rejected and attempted steps. A solver that cannot run gives a row, not an
+    exception."""
+    import jaxstring
+
+    try:
+        traj = block(
+            jaxstring.simulate(
+                scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=MAX_STEPS
+            )
+        )
+    except Exception as e:  # noqa: BLE001  (a solver that cannot run is a result)
+        return {"ok": False, "end": None, "status": f"{type(e).__name__}: {e}"}
+    stats = stats_dict(traj)
+    acc = stats.get("num_accepted_steps", 0)
+    rej = stats.get("num_rejected_steps", 0)
+    return {
+        "ok": bool(traj.ok),
+        "end": np.asarray(traj.end_mass) if traj.ok else None,
+        "status": traj.status,
+        **stats,
+        "accepted": acc,
+        "rejected": rej,
+        "attempted": acc + rej,
+    }

@@ -64,43 +64,15 @@ class Code:
 
 def _jaxstring_code(scene, name, ts, tol):
     def call():
-        try:
-            traj = common.block(
-                jaxstring.simulate(
-                    scene, name, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
-                )
-            )
-        except Exception as e:  # a solver that cannot run is a result, not a crash
-            return {"ok": False, "end": None, "status": f"{type(e).__name__}: {e}"}
-        acc = int(traj.stats["num_accepted_steps"])
-        rej = int(traj.stats["num_rejected_steps"])
-        return {
-            "ok": bool(traj.ok),
-            "end": np.asarray(traj.end_mass) if traj.ok else None,
-            "status": traj.status,
-            "accepted": acc,
-            "rejected": rej,
-            "attempted": acc + rej,
-        }
+        return common.simulate_row(scene, name, ts, tol)
 
     return Code(name, "jaxstring", call)
-
-
-def _peer_result(out, end_mass):
-    """A peer solve's outcome as a row: status, end-mass positions, call counts."""
-    return {
-        "ok": out["ok"],
-        "end": end_mass(out["ys"]) if out["ok"] else None,
-        "status": "success" if out["ok"] else out["message"][:120],
-        "nfev": out["nfev"],
-        "njev": out["njev"],
-    }
 
 
 def _cvode_code(peer, y0, ts, tol, jac):
     def call():
         out = peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac)
-        return _peer_result(out, peer.end_mass)
+        return common.peer_result(out, peer.end_mass)
 
     tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
     return Code(f"{CVODE} [{tag}]", "cvode", call, warmup=peer.warmup)
@@ -113,7 +85,7 @@ def _callback_code(scene, ts, tol, max_fev):
 
     def call():
         out = references.solve(rhs, "ida", ts, tol, tol, "jax-band")
-        return _peer_result(out, rhs.end_mass)
+        return common.peer_result(out, rhs.end_mass)
 
     return Code(f"{CALLBACK} [band Jacobian]", "callback", call, warmup=rhs.compile)
 

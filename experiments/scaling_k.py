@@ -90,32 +90,9 @@ class Code:
 
 def _jaxstring_code(scene, name, ts, tol):
     def call():
-        try:
-            traj = common.block(
-                jaxstring.simulate(
-                    scene, name, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
-                )
-            )
-        except Exception as e:  # a solver that cannot run is a result, not a crash
-            return {"ok": False, "end": None, "status": f"{type(e).__name__}: {e}"}
-        return {
-            "ok": bool(traj.ok),
-            "end": np.asarray(traj.end_mass) if traj.ok else None,
-            "status": traj.status,
-            **common.stats_dict(traj),
-        }
+        return common.simulate_row(scene, name, ts, tol)
 
     return Code(name, "jaxstring", call)
-
-
-def _peer_result(out, end_mass):
-    return {
-        "ok": out["ok"],
-        "end": end_mass(out["ys"]) if out["ok"] else None,
-        "status": "success" if out["ok"] else out["message"][:120],
-        "nfev": out["nfev"],
-        "njev": out["njev"],
-    }
 
 
 def _numba_code(formulation, k, EA, y0, ts, tol):
@@ -125,7 +102,7 @@ def _numba_code(formulation, k, EA, y0, ts, tol):
     jac = "analytic" if peer.jac is not None else "dq"
 
     def call():
-        return _peer_result(peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac),
+        return common.peer_result(peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac),
                             peer.end_mass)  # fmt: skip
 
     tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
@@ -137,7 +114,7 @@ def _callback_code(scene, name, ts, tol):
 
     def call():
         out = references.solve(rhs, name, ts, tol, tol, "jax-band")
-        return _peer_result(out, rhs.end_mass)
+        return common.peer_result(out, rhs.end_mass)
 
     return Code(f"{name} on JAX callbacks [band Jacobian]", "callback", call,
                 warmup=rhs.compile)  # fmt: skip
