@@ -108,10 +108,9 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
 
 
 def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
-    # Two devices, one dispatching thread each, vmapped BDF groups of 16: the
-    # second call of the same compiled sweep once deadlocked inside XLA:CPU
-    # (its concurrency-optimised scheduler); every call must finish and equal the
-    # one-device sweep.
+    # Two CPU devices, vmapped BDF groups of 16: with one dispatching thread per
+    # device the second call of the same compiled sweep deadlocked inside XLA:CPU;
+    # every call must finish and equal the one-device sweep.
     code = textwrap.dedent(
         """
         import numpy as np, jax
