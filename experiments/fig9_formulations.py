@@ -26,7 +26,6 @@ Run: ``python experiments/fig9_formulations.py [--quick] [--solvers a,b]``.
 import math
 import os
 import statistics
-import time
 
 import _common as common
 import numpy as np
@@ -42,13 +41,6 @@ LABEL = {"displacement": "displacement", "natural": "(eps, t)", "angle": "(eps, 
 CVODE = "CVODE-numba"
 CALLBACK = "IDA on JAX callbacks"
 REF_TOL = 1e-11
-
-
-def _clock(fn):
-    """(result, wall s, process CPU s) of one call."""
-    w, c = time.perf_counter(), time.process_time()
-    out = fn()
-    return out, time.perf_counter() - w, time.process_time() - c
 
 
 class Code:
@@ -98,14 +90,14 @@ def measure(codes, repeats, long_run_s=common.LONG_RUN_S):
     results = {}
     for code in codes:
         warm = code.warmup() if code.warmup is not None else None
-        out, wall, _ = _clock(code.call)
+        out, wall, _ = common.clock(code.call)
         code.first = wall if warm is None else warm
         results[code.label] = out
     for i in range(max(repeats, 1)):
         for code in codes:
             if i > 0 and (not results[code.label]["ok"] or code.walls[0] > long_run_s):
                 continue
-            out, wall, cpu = _clock(code.call)
+            out, wall, cpu = common.clock(code.call)
             code.walls.append(wall)
             code.cpus.append(cpu)
             results[code.label] = out

@@ -36,7 +36,6 @@ Run: ``python experiments/race_strongest.py [--quick] [--presets]``.
 import itertools
 import math
 import os
-import time
 
 import _common as common
 import numpy as np
@@ -54,13 +53,6 @@ SCIPY = ("BDF", "Radau", "LSODA")
 REF_TOL = 1e-11
 CVODE = "CVODE-numba"
 LABELS = {"displacement": "displacement", "natural": "(eps, t)", "angle": "(eps, phi)"}
-
-
-def _clock(fn):
-    """(result, wall s, process CPU s) of one call."""
-    w, c = time.perf_counter(), time.process_time()
-    out = fn()
-    return out, time.perf_counter() - w, time.process_time() - c
 
 
 class Code:
@@ -118,8 +110,8 @@ def _codes(scene, peer, ts, solvers, scipy_methods, callback, budget_s, numba_s)
             return np.asarray(traj.end_mass) if traj.ok else None
 
         def js_prepare(tol, run=js_run):
-            _, first, _ = _clock(lambda: run(tol))
-            _, again, _ = _clock(lambda: run(tol))
+            _, first, _ = common.clock(lambda: run(tol))
+            _, again, _ = common.clock(lambda: run(tol))
             return max(first - again, 0.0)
 
         codes.append(Code(f"jaxstring {name}", "jaxstring", js_run, js_prepare))
@@ -194,7 +186,7 @@ def race_scene(
         code.prepare(tols[0])
         reached = 0
         for tol in tols:
-            end, wall, cpu = _clock(lambda: code.run(tol))
+            end, wall, cpu = common.clock(lambda: code.run(tol))
             err = (
                 common.end_mass_error(end[1:], ref[1:]) if end is not None else math.nan
             )
@@ -221,7 +213,7 @@ def race_scene(
     for _ in range(max(repeats - 1, 0)):
         for row in _candidates(rows, targets):
             code = by_label[row["code"]]
-            _, wall, cpu = _clock(lambda: code.run(row["tol"]))
+            _, wall, cpu = common.clock(lambda: code.run(row["tol"]))
             row["wall_s"] = min(row["wall_s"], wall)
             row["cpu_s"] = min(row["cpu_s"], cpu)
             row["repeats"] += 1
@@ -440,8 +432,8 @@ def _js_curve(scene, solver, ts, ref, system, EA, tols, rows):
 
         first = None
         if i == 0:
-            _, first, _ = _clock(run)
-        traj, wall, cpu = _clock(run)
+            _, first, _ = common.clock(run)
+        traj, wall, cpu = common.clock(run)
         end = np.asarray(traj.end_mass) if traj.ok else None
         err = common.end_mass_error(end[1:], ref[1:]) if end is not None else math.nan
         rows.append(

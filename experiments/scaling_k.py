@@ -40,7 +40,6 @@ JAX callbacks; ``none``: jaxstring alone).
 import importlib.util
 import math
 import statistics
-import time
 
 import _common as common
 import numpy as np
@@ -70,13 +69,6 @@ def fit_exponent(ks, times):
     if len(ks) < 2:
         return math.nan
     return float(np.polyfit(np.log(ks), np.log(times), 1)[0])
-
-
-def _clock(fn):
-    """(result, wall s, process CPU s) of one call."""
-    w, c = time.perf_counter(), time.process_time()
-    out = fn()
-    return out, time.perf_counter() - w, time.process_time() - c
 
 
 class Code:
@@ -126,11 +118,11 @@ def measure(code, repeats, long_run_s=common.LONG_RUN_S):
     run's dict with `run_s`, `cpu_s` (medians), `repeats`, `compile_s`, and the
     lists `walls`, `cpus`."""
     warm = code.warmup() if code.warmup is not None else None
-    out, first, _ = _clock(code.call)
+    out, first, _ = common.clock(code.call)
     walls, cpus = [], []
     if out["ok"]:
         for i in range(max(repeats, 1)):
-            out, w, c = _clock(code.call)
+            out, w, c = common.clock(code.call)
             walls.append(w)
             cpus.append(c)
             if i == 0 and w > long_run_s:
@@ -259,7 +251,7 @@ def main(
         for i in range(rounds):
             for group in redo:
                 for r, code in group:
-                    out, w, c = _clock(code.call)
+                    out, w, c = common.clock(code.call)
                     times[id(r)][0].append(w)
                     times[id(r)][1].append(c)
                     r["ok"] = r["ok"] and out["ok"]

@@ -30,7 +30,6 @@ from sweep_speed import end_mass  # isort: skip
 import _common as common
 import numpy as np
 import peers
-from race_strongest import _clock
 
 import jaxstring as js
 from jaxstring._sweep import sweep
@@ -78,12 +77,14 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode, peer_membe
                     devices="auto", max_steps=common.MAX_STEPS)  # fmt: skip
         return np.asarray(res.out), bool(np.all(res.ok))
 
-    cv_end, cv_wall, cv_cpu = _clock(lambda: _cvode_loop(k, picked, ts, cvode_tol))
+    cv_end, cv_wall, cv_cpu = common.clock(
+        lambda: _cvode_loop(k, picked, ts, cvode_tol)
+    )
     cv_err = _errors(cv_end, refs)
     first = None
     chosen = None
     for tol in tols:  # loose to tight: the first at which every member is as good
-        (end, ok), wall, _ = _clock(lambda: run_sweep(tol))
+        (end, ok), wall, _ = common.clock(lambda: run_sweep(tol))
         first = wall if first is None else first
         err = _errors(end[::stride], refs)
         print(f"k={k} sweep {solver} tol={tol:g}: ok={ok} max err "
@@ -98,10 +99,10 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode, peer_membe
     sw_wall, sw_cpu = [], []
     cv_walls, cv_cpus = [cv_wall], [cv_cpu]
     for _ in range(repeats):
-        _, w, c = _clock(lambda: run_sweep(tol))
+        _, w, c = common.clock(lambda: run_sweep(tol))
         sw_wall.append(w)
         sw_cpu.append(c)
-        _, w, c = _clock(lambda: _cvode_loop(k, picked, ts, cvode_tol))
+        _, w, c = common.clock(lambda: _cvode_loop(k, picked, ts, cvode_tol))
         cv_walls.append(w)
         cv_cpus.append(c)
     cv_walls = [w * stride for w in cv_walls]
