@@ -92,7 +92,10 @@ def test_references_quick_agree_with_jaxstring(results_in_tmp):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not HAS_SCIPY, reason="scipy (bench extra) not installed")
+@pytest.mark.skipif(
+    not (HAS_SCIPY and HAS_SUNDAE and HAS_NUMBA),
+    reason="scipy, scikit-sundae, numba (bench extra)",
+)
 def test_fig10_quick(results_in_tmp):
     rows = _module("fig10_integrators").main(
         quick=True, solvers=["kvaerno5", "implicit_euler_fixed"]
@@ -105,6 +108,9 @@ def test_fig10_quick(results_in_tmp):
         assert ie["num_steps"] == 40  # 0.2 s / dt 0.005
         # adaptive 5th order at 1e-7 vs first order at dt = 5 ms: orders apart
         assert k5["err_m"] < 1e-5 < ie["err_m"] < 0.1
+        # CVODE-numba at rtol 1e-7 lands within 1e-6 m of its own run at 1e-11
+        cvode = [r for r in rows if r["EA"] == EA and r["solver"].startswith("CVODE-")]
+        assert len(cvode) == 1 and cvode[0]["ok"] and cvode[0]["err_m"] < 1e-6
     assert all(_files(results_in_tmp, "fig10_integrators_quick").values())
 
 
