@@ -131,7 +131,7 @@ def main(quick=False, ks=None, members=None, solver="bdf", tols=None,
         raise ValueError(
             f"peer_members={peer_members} must divide members={members}"
         )
-    tols = tols or [1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
+    tols = tols or [3e-6, 2e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
     repeats = repeats or (1 if quick else 2)
     rows = [
         race_k(k, members, solver, tols, cvode_tol, repeats, min(group, members), mode,
