@@ -26,6 +26,7 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
+import jax.lax as lax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -33,7 +34,15 @@ import optax
 
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._simulate import ADJOINTS as ADJOINTS, SolveConfig, make_adjoint, solve
+from ._sensitivity import SensitivityAdjoint, sensitivity_solve
+from ._simulate import (
+    ADJOINTS as ADJOINTS,
+    SolveConfig,
+    make_adjoint,
+    solve,
+    solver_parts,
+)
+from ._trajectory import Trajectory
 from ._validate import check_int, check_nonnegative, check_positive, check_times
 
 
@@ -205,18 +214,10 @@ def _objective(theta, pos, frozen, loss_fn, config, simulate, ts):
     return loss_fn(scene)
 
 
-def _forward_mode(f):
-    """`f` with a reverse-mode rule computed in forward mode: one JVP per optimised
-    scalar, sharing the primal solve. Lets reverse-mode callers (optax line
-    searches) differentiate through diffrax's `ForwardMode`."""
-
-    def value_and_grad(theta):
-        flat, unravel = jfu.ravel_pytree(theta)
-        g = lambda x: f(unravel(x))
-        value, grad = jax.vmap(lambda v: jax.jvp(g, (flat,), (v,)), out_axes=(None, 0))(
-            jnp.eye(flat.size, dtype=flat.dtype)
-        )
-        return value, unravel(grad)
+def _with_gradient(f, value_and_grad):
+    """`f` with a reverse-mode rule from `value_and_grad(theta) -> (value, grad)`:
+    lets reverse-mode callers (`jax.grad`, optax line searches) use a gradient
+    computed another way (forward mode, sensitivities)."""
 
     @jax.custom_vjp
     def h(theta):
@@ -229,9 +230,65 @@ def _forward_mode(f):
     return h
 
 
+def _forward_mode(f):
+    """`f` whose gradient is computed in forward mode: one JVP per optimised
+    scalar, sharing the primal solve (diffrax's `ForwardMode`)."""
+
+    def value_and_grad(theta):
+        flat, unravel = jfu.ravel_pytree(theta)
+        g = lambda x: f(unravel(x))
+        value, grad = jax.vmap(lambda v: jax.jvp(g, (flat,), (v,)), out_axes=(None, 0))(
+            jnp.eye(flat.size, dtype=flat.dtype)
+        )
+        return value, unravel(grad)
+
+    return _with_gradient(f, value_and_grad)
+
+
+def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
+    """Loss and gradient from the sensitivities integrated with the state
+    (`jaxstring._sensitivity`): the loss of the saved states, differentiated along
+    (S_j, e_j) for each optimised scalar j."""
+    flat, unravel = jfu.ravel_pytree(theta)
+    scene_of = lambda x: eqx.combine(_from_theta(unravel(x), pos), frozen)
+    scene = scene_of(flat)
+    if ts is None:
+        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+    solver, controller, dt0 = solver_parts(scene, config)
+    # Each direction is its parameter's own magnitude (log-parameters: 1), so the
+    # sensitivities have the state's scale and its error control fits them.
+    is_log = jfu.ravel_pytree(
+        jtu.tree_map(lambda x, p: jnp.full(jnp.shape(x), p), theta, pos)
+    )[0]
+    scale = jnp.where(is_log | (flat == 0), 1.0, jnp.abs(flat))
+    scale = lax.stop_gradient(scale)
+    directions = jnp.diag(scale)
+    ys, S, sol = sensitivity_solve(
+        scene_of, flat, directions, solver, controller, ts, config.max_steps, dt0
+    )
+
+    def loss_of(ys_, x):
+        sc = scene_of(x)
+        traj = Trajectory.from_solution(ts, ys_, sol.result, sol.stats, sc)
+        return loss_fn(traj, sc)
+
+    value, grad = jax.vmap(
+        lambda s, e: jax.jvp(loss_of, (ys, flat), (s, e)), out_axes=(None, 0)
+    )(S, directions)
+    return value, unravel(grad / scale)
+
+
 def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     f = lambda th: _objective(th, pos, frozen, loss_fn, config, simulate, ts)
-    if isinstance(make_adjoint(config.adjoint), dfx.ForwardMode):
+    adjoint = make_adjoint(config.adjoint)
+    if isinstance(adjoint, SensitivityAdjoint):
+        f = _with_gradient(
+            f,
+            lambda th: _sensitivity_value_and_grad(
+                th, pos, frozen, loss_fn, config, ts
+            ),
+        )
+    elif isinstance(adjoint, dfx.ForwardMode):
         f = _forward_mode(f)
     value, grad = jax.value_and_grad(f)(theta)
     return value, grad, f
@@ -321,6 +378,19 @@ def _setup(
                 "be > 0; give a positive initial value or positive=False for it."
             )
     adj = make_adjoint(adjoint)
+    if isinstance(adj, SensitivityAdjoint):
+        if not simulate:
+            raise ValueError(
+                "`adjoint='sensitivity'` integrates the scene's sensitivities itself "
+                "and needs simulate=True (a loss that simulates itself: use "
+                "'forward' or 'recursive')."
+            )
+        if solver_kw.get("project", True) and scene.model.projects:
+            raise ValueError(
+                "`adjoint='sensitivity'` does not fit a model that projects onto its "
+                f"constraint ({type(scene.model).__name__}); use 'forward' or "
+                "'recursive', or project=False."
+            )
     config = SolveConfig(adjoint=adj, **solver_kw)
     if ts is not None:
         check_times("ts", ts, scene.t0, scene.t1)
@@ -429,8 +499,11 @@ def fit(
       `"direct"` (`DirectAdjoint`: small `max_steps` only), `"backsolve"`
       (`BacksolveAdjoint`: continuous adjoint, gradients accurate to the solver
       tolerance only; not for projecting models), `"forward"` (`ForwardMode`: one JVP
-      per parameter, no checkpoints; best for one or two parameters) or a diffrax
-      adjoint instance.
+      per parameter, no checkpoints; best for one or two parameters),
+      `"sensitivity"` (forward sensitivities integrated with the state under the
+      same error control, so the gradient is accurate where the steps chosen for the
+      state alone do not resolve it, e.g. through slack-and-snap motions; not for
+      projecting models) or a diffrax adjoint instance.
     - `checkpoints`: for `"recursive"`: `"auto"` counts the steps of one forward run
       and stores that many checkpoints (about one recomputation per step in the
       backward pass); `None` is diffrax's default (log-depth recursion); or an int.

@@ -11,6 +11,7 @@ import numpy as np
 from . import _programs
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
+from ._sensitivity import SensitivityAdjoint
 from ._solvers.diffrax_compat import result_code, result_from_code
 from ._solvers.presets import ACCURACY_PRESETS, resolve_preset
 from ._solvers.projected import ProjectedSolver
@@ -26,12 +27,13 @@ from ._validate import (
 )
 
 
-ADJOINTS = ("recursive", "direct", "backsolve", "forward")
+ADJOINTS = ("recursive", "direct", "backsolve", "forward", "sensitivity")
 
 
 def make_adjoint(adjoint, checkpoints=None):
     """A diffrax adjoint from a name (`"recursive"`, `"direct"`, `"backsolve"`,
-    `"forward"`) or a `diffrax.AbstractAdjoint` instance (returned as is)."""
+    `"forward"`, `"sensitivity"`: `SensitivityAdjoint`) or a
+    `diffrax.AbstractAdjoint` instance (returned as is)."""
     if isinstance(adjoint, dfx.AbstractAdjoint):
         return adjoint
     if adjoint is None:
@@ -43,6 +45,8 @@ def make_adjoint(adjoint, checkpoints=None):
         return dfx.DirectAdjoint()
     if adjoint == "backsolve":
         return dfx.BacksolveAdjoint()
+    if adjoint == "sensitivity":
+        return SensitivityAdjoint()
     return dfx.ForwardMode()
 
 
@@ -106,12 +110,9 @@ def _default_adjoint(adjoint) -> bool:
     )
 
 
-def _diffeqsolve(scene: Scene, config: SolveConfig, saveat):
-    """diffrax's solution of `scene` under `config`: the solve of `solve`, saved as
-    `saveat(fn)` says, with `fn` the projection onto the constraint manifold for a
-    projected solve (None: the state as is). E.g. every step:
-    `saveat=lambda fn: dfx.SaveAt(steps=True)`.
-    """
+def solver_parts(scene: Scene, config: SolveConfig):
+    """The diffrax solver (before any projection wrapper), step-size controller and
+    initial step of `scene` under `config`, as every solve builds them."""
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
     adaptive = is_adaptive(config.solver)
     dt0 = config.dt0
@@ -120,21 +121,36 @@ def _diffeqsolve(scene: Scene, config: SolveConfig, saveat):
     dt0 = None if dt0 is None else f64(dt0)
     nr = config.rtol if config.newton_rtol is None else config.newton_rtol
     na = config.atol if config.newton_atol is None else config.newton_atol
+    solver = build_solver(config.solver, f64(nr), f64(na), scene)
+    controller = make_controller(
+        config.solver, f64(config.rtol), f64(config.atol), adaptive, config.step_control
+    )
+    return solver, controller, dt0
+
+
+def _diffeqsolve(scene: Scene, config: SolveConfig, saveat):
+    """diffrax's solution of `scene` under `config`: the solve of `solve`, saved as
+    `saveat(fn)` says, with `fn` the projection onto the constraint manifold for a
+    projected solve (None: the state as is). E.g. every step:
+    `saveat=lambda fn: dfx.SaveAt(steps=True)`.
+    """
     adjoint = make_adjoint(config.adjoint)
     if isinstance(adjoint, dfx.BacksolveAdjoint) and scene.model.projects:
         raise ValueError(
             "`adjoint='backsolve'` does not fit a model that projects onto its "
             f"constraint ({type(scene.model).__name__}); use 'recursive'."
         )
-    solver = build_solver(config.solver, f64(nr), f64(na), scene)
+    solver, controller, dt0 = solver_parts(scene, config)
     save_fn = None
     if config.project and scene.model.projects:
         if not _default_adjoint(config.adjoint):
             # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
             # differentiate in forward mode / with DirectAdjoint, but cannot see
             # through the wrapper: do it before wrapping.
-            kind = {dfx.ForwardMode: "lax", dfx.DirectAdjoint: "bounded"}.get(
-                type(adjoint)
+            kind = (
+                "lax"
+                if isinstance(adjoint, dfx.ForwardMode)
+                else {dfx.DirectAdjoint: "bounded"}.get(type(adjoint))
             )
             if kind is not None and isinstance(solver, dfx.AbstractRungeKutta):
                 if solver.scan_kind is None:
@@ -145,9 +161,6 @@ def _diffeqsolve(scene: Scene, config: SolveConfig, saveat):
         else:
             solver = ProjectedSolver(solver)
         save_fn = lambda t, y, args: args.model.project(y)
-    controller = make_controller(
-        config.solver, f64(config.rtol), f64(config.atol), adaptive, config.step_control
-    )
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
         if config.progress

@@ -462,6 +462,23 @@ CASES = [
         ["`ts`", "0.9", "[0, 0.5]"],
     ),
     (
+        "value_and_grad-sensitivity-simulate",
+        lambda: js.value_and_grad(
+            pendulum(), lambda s: 0.0, ["EA"], simulate=False, adjoint="sensitivity"
+        ),
+        ["`adjoint='sensitivity'`", "simulate=True"],
+    ),
+    (
+        "value_and_grad-sensitivity-projects",
+        lambda: js.value_and_grad(
+            js.scenes.string_pendulum(formulation="natural", k=4, t1=0.5),
+            loss,
+            ["EA"],
+            adjoint="sensitivity",
+        ),
+        ["`adjoint='sensitivity'`", "NaturalTangentString", "project=False"],
+    ),
+    (
         "gauss_newton-sigma",
         lambda: js.gauss_newton(pendulum(), residuals, ["EA"], sigma=0.0),
         ["`sigma`", "0.0", "> 0"],

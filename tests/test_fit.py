@@ -123,3 +123,29 @@ def test_fit_freezes_other_leaves_and_rejects_bad_input():
         )
     with pytest.raises(ValueError, match="unknown adjoint"):
         _fit.make_adjoint("adjoint")
+
+
+@pytest.mark.parametrize("positive", [False, True])
+def test_sensitivity_gradient_matches_central_differences(positive):
+    # The sensitivities integrated beside the state under its error control give
+    # the gradient of the same loss as differentiating the solve (central
+    # differences of the solve as the reference), in the parameters' own units and
+    # in log units.
+    scene = js.scenes.string_pendulum(
+        formulation="displacement", k=4, EA=1e3, alpha=0.02, t1=0.3
+    )
+    kw = dict(rtol=1e-11, atol=1e-11, n_save=11)
+    _, grad = _fit.value_and_grad(
+        scene,
+        _end_loss,
+        ["alpha", "EA"],
+        adjoint="sensitivity",
+        positive=positive,
+        **kw,
+    )
+    if positive:  # d/dlog p = p d/dp
+        grad = {"alpha": grad["alpha"] / 0.02, "EA": grad["EA"] / 1e3}
+    config = _fit.SolveConfig(**kw)
+    assert_grad_matches_central_differences(
+        lambda s: _end_loss(_fit.solve(s, config), s), scene, grad
+    )
