@@ -16,7 +16,9 @@ tight solve does not complete, see the notes); the smoothing table measures that
 stand-in and each eps_s against it at k = 10.
 
 Output: experiments/results/slack_snap.{md,csv,png}, slack_snap_smoothing.{md,csv},
-slack_snap_steps.csv (and slack_snap_k160.{md,csv} with --k_large 160). Runtime:
+slack_snap_steps.csv (and slack_snap_k160.{md,csv} with --k_large 160;
+slack_snap_gradients.{md,csv} with --gradients_only: forward mode and error-controlled
+sensitivities against central differences through snaps). Runtime:
 27 min with --k_large 160 on a shared 2-core machine at load 15-20 (--quick: k = 10).
 """
 
@@ -220,6 +222,7 @@ def main(
     cvode=True,
     figure=True,
     large_only=False,
+    gradients_only=False,
     repeats=None,
 ):
     from _common import set_quick, write_table
@@ -228,6 +231,8 @@ def main(
     repeats = repeats or (1 if quick else REPEATS)
     if smoothing is None:
         smoothing = SLACK_SMOOTHING["angle"]
+    if gradients_only:
+        return gradient_study(quick)
     if large_only:
         if not k_large:
             raise ValueError("`large_only` needs `k_large`.")
@@ -291,6 +296,136 @@ def large_study(k_large, smoothing, repeats=1):
     ]
     write_table(f"slack_snap_k{k_large}", large, COLUMNS, title, notes=notes)
     return large
+
+
+# Gradient study: (k, EA, t1) of the snap case (released from 3 pi/4, (eps, phi)).
+GRADIENT_CASES = ((4, 1e6, 0.6), (4, 1e6, 2.0))
+# (adjoint, solver, rtol) per case.
+GRADIENT_METHODS = (
+    ("forward", "rodas5p", 1e-9),
+    ("forward", "rodas5p", 1e-11),
+    ("forward", "kvaerno5", 1e-8),
+    ("forward", "kvaerno5", 1e-9),
+    ("sensitivity", "rodas5p", 1e-9),
+    ("sensitivity", "kvaerno5", 1e-9),
+)
+FD_TOL = 1e-11
+FD_STEPS = (1e-4, 1e-5)
+
+
+def _end_loss(traj, sc):
+    """x + y / 2 of the end mass at the last save time (m)."""
+    del sc
+    return jnp.sum(traj.obs["positions"][-1, -1, :] * jnp.array([1.0, 0.5]))
+
+
+GETTERS = (("alpha", lambda s: s.effects[1].alpha), ("EA", lambda s: s.model.EA))
+
+
+def central_differences(sc, n_save, rel_step):
+    """d loss / d(alpha, EA) by central differences of Rodas5P solves at FD_TOL."""
+    import equinox as eqx
+
+    from jaxstring import _fit
+
+    config = _fit.SolveConfig(
+        solver="rodas5p", rtol=FD_TOL, atol=FD_TOL, n_save=n_save, max_steps=4_000_000
+    )
+    f = eqx.filter_jit(lambda s: _end_loss(_fit.solve(s, config), s))
+    out = {}
+    for name, get in GETTERS:
+        p = float(get(sc))
+        h = rel_step * p
+        plus = float(f(eqx.tree_at(get, sc, jnp.asarray(p + h))))
+        minus = float(f(eqx.tree_at(get, sc, jnp.asarray(p - h))))
+        out[name] = (plus - minus) / (2 * h)
+    return out
+
+
+def gradient_study(quick=False):
+    """The end-mass position after a snap, differentiated in forward mode and with
+    error-controlled sensitivities, against central differences:
+    slack_snap_gradients.{md,csv}."""
+    from _common import write_table
+
+    import jaxstring as js
+
+    cases = GRADIENT_CASES[:1] if quick else GRADIENT_CASES
+    rows = []
+    for k, EA, t1 in cases:
+        sc = js.scenes.string_pendulum(
+            formulation="angle",
+            k=k,
+            EA=EA,
+            alpha=0.01,
+            theta0=3 * math.pi / 4,
+            t1=t1,
+            effects=("gravity", "kelvin_voigt", "slack"),
+        )
+        n_save = int(round(t1 * 100)) + 1
+        fd = {h: central_differences(sc, n_save, h) for h in FD_STEPS}
+        ref = fd[FD_STEPS[-1]]
+        spread = {
+            n: abs(fd[FD_STEPS[0]][n] - ref[n]) / abs(ref[n]) for n in ("alpha", "EA")
+        }
+        for adjoint, solver, rtol in GRADIENT_METHODS:
+            row = dict(k=k, EA=EA, t1=t1, adjoint=adjoint, solver=solver, rtol=rtol)
+            kw = dict(
+                adjoint=adjoint,
+                solver=solver,
+                rtol=rtol,
+                atol=rtol,
+                n_save=n_save,
+                max_steps=1_000_000,
+            )
+            call = lambda kw=kw: js.value_and_grad(sc, _end_loss, ["alpha", "EA"], **kw)
+            try:
+                t0 = time.perf_counter()
+                call()
+                first = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                _, grad = call()
+                row["run_s"] = time.perf_counter() - t0
+                row["compile_s"] = max(first - row["run_s"], 0.0)
+                row["ok"] = True
+            except Exception as e:  # noqa: BLE001 (a failure is a result)
+                row.update(ok=False, status=f"{type(e).__name__}"[:60])
+                rows.append(row)
+                print(row, flush=True)
+                continue
+            for n in ("alpha", "EA"):
+                row[f"d_{n}"] = float(grad[n])
+                row[f"fd_{n}"] = ref[n]
+                row[f"err_{n}"] = abs(float(grad[n]) - ref[n]) / abs(ref[n])
+                row[f"fd_spread_{n}"] = spread[n]
+            row["status"] = "success" if np.isfinite(row["d_alpha"]) else "non-finite"
+            rows.append(row)
+            print(row, flush=True)
+    columns = (
+        "k EA t1 adjoint solver rtol ok d_alpha d_EA err_alpha err_EA fd_alpha "
+        "fd_EA fd_spread_alpha fd_spread_EA compile_s run_s status"
+    ).split()
+    write_table(
+        "slack_snap_gradients",
+        rows,
+        columns,
+        "Gradients through snaps: d(x + y/2 of the end mass at t1)/d(alpha, EA), "
+        "(eps, phi), released from 3 pi/4, smoothed law "
+        f"(eps_s = {SLACK_SMOOTHING['angle']:g})",
+        notes=[
+            "adjoint: forward = diffrax's ForwardMode through the solve (the "
+            "derivative along the state's steps); sensitivity = the sensitivities "
+            "integrated beside the state under the error control "
+            "(jaxstring._sensitivity).",
+            f"fd_*: central differences of Rodas5P solves at rtol = atol = {FD_TOL:g},"
+            f" steps of {FD_STEPS[-1]:g} of the value; err_*: |d - fd| / |fd|; "
+            f"fd_spread_*: the same central differences with steps of "
+            f"{FD_STEPS[0]:g} against them.",
+            "run_s: the second call of value_and_grad (wall, s); compile_s: the first "
+            "minus the second. A failed call shows its exception.",
+        ],
+    )
+    return rows
 
 
 def _error(end, ref):
@@ -405,4 +540,5 @@ if __name__ == "__main__":
         k_large=dict(type=int, default=None, help="also this k, smoothed law only"),
         smoothing=dict(type=float, default=None, help="eps_s (default 1e-7)"),
         large_only=dict(action="store_true", help="only the --k_large study"),
+        gradients_only=dict(action="store_true", help="only the gradient study"),
     )

@@ -174,12 +174,13 @@ def _snap_scene(t1):
     [("rodas5p", 1e-9, 2.0), ("kvaerno5", 1e-9, 0.6)],
 )
 def test_sensitivities_give_the_gradient_through_snaps(solver, rtol, t1):
-    # Differentiated along the state's own steps, the end-mass position after
-    # several snaps (2 s) is off by 1e-3 relative even at rtol 1e-11, and Kvaerno5
-    # in forward mode stops at the first snap (0.6 s) on a non-finite linear solve.
-    # With the sensitivities integrated beside the state, under its error control,
-    # both match central differences of tight solves (rtol 1e-11, steps of 1e-5 of
-    # the value; a step of 1e-4 in EA already crosses a change of the snap sequence).
+    # Differentiated along the state's own steps (forward mode), the end-mass
+    # position after several snaps (2 s) is off by 1e-3 relative even at rtol 1e-11,
+    # and Kvaerno5 in forward mode can stop at the first snap (0.6 s, rtol 1e-8) on
+    # a non-finite linear solve. With the sensitivities integrated beside the state,
+    # under its error control, both match central differences of tight solves
+    # (rtol 1e-11, steps of 1e-5 of the value; a step of 1e-4 in EA already
+    # crosses a change of the snap sequence).
     scene = _snap_scene(t1)
     n_save = int(round(t1 * 100)) + 1
     kw = dict(solver=solver, rtol=rtol, atol=rtol, n_save=n_save, max_steps=1_000_000)
