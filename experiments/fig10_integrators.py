@@ -196,6 +196,25 @@ def where_time_goes(scene, rows_js, peer_rows, quick=False):
     return cost, out, path
 
 
+def _skipped(EA, name):
+    return {
+        "EA": EA,
+        "solver": name,
+        "ok": False,
+        "status": "skipped (failed or over budget at lower EA)",
+    }
+
+
+def _keep(r, tables, dead, budget_s):
+    """Add a finished row to `tables`; a code that failed or ran past the budget
+    sits out the stiffer EAs (`dead`)."""
+    if not r["ok"] or r["run_s"] > budget_s:
+        dead.add(r["solver"])
+    for table in tables:
+        table.append(r)
+    print(f"EA={r['EA']:g} {r['solver']}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
+
+
 def main(
     quick=False,
     formulation="angle",
@@ -231,14 +250,7 @@ def main(
         ref, ref_label = peer_reference(peer, y0, ts, jac)
         for name in names:
             if name in dead:
-                rows.append(
-                    {
-                        "EA": EA,
-                        "solver": name,
-                        "ok": False,
-                        "status": "skipped (failed or over budget at lower EA)",
-                    }
-                )
+                rows.append(_skipped(EA, name))
                 continue
             r = common.run_jaxstring(
                 scene,
@@ -255,24 +267,13 @@ def main(
                 kind="jaxstring",
                 err_m=common.end_mass_error(r.pop("end"), ref) if r["ok"] else math.nan,
             )
-            if not r["ok"] or r["run_s"] > budget_s:
-                dead.add(name)
-            rows.append(r)
-            js_rows.append(r)
-            print(f"EA={EA:g} {name}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
+            _keep(r, (rows, js_rows), dead, budget_s)
         codes = peer_codes(
             scene, peer, y0, ts, PAPER["tol"], jac, budget_s, not no_callback
         )
         for label, kind, warmup, call, end_mass in codes:
             if label in dead:
-                rows.append(
-                    {
-                        "EA": EA,
-                        "solver": label,
-                        "ok": False,
-                        "status": "skipped (failed or over budget at lower EA)",
-                    }
-                )
+                rows.append(_skipped(EA, label))
                 continue
             tm, out = common.timed_split(warmup, call, repeats)
             r = common.peer_result(out, end_mass)
@@ -286,11 +287,7 @@ def main(
                 compile_s=tm.compile_s,
                 err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
             )
-            if not r["ok"] or r["run_s"] > budget_s:
-                dead.add(label)
-            rows.append(r)
-            peer_rows.append(r)
-            print(f"EA={EA:g} {label}: {r['run_s']:.3g} s ok={r['ok']}", flush=True)
+            _keep(r, (rows, peer_rows), dead, budget_s)
     # Normalise like the paper: 1 = the fastest successful run at the smallest EA.
     base = min(
         (r["run_s"] for r in rows if r.get("ok") and r["EA"] == EAs[0]),

@@ -370,14 +370,9 @@ def gradient_study(quick=False):
         }
         for adjoint, solver, rtol in GRADIENT_METHODS:
             row = dict(k=k, EA=EA, t1=t1, adjoint=adjoint, solver=solver, rtol=rtol)
-            kw = dict(
-                adjoint=adjoint,
-                solver=solver,
-                rtol=rtol,
-                atol=rtol,
-                n_save=n_save,
-                max_steps=1_000_000,
-            )
+            names = ("adjoint", "solver", "rtol", "atol")
+            kw = dict(zip(names, (adjoint, solver, rtol, rtol)), n_save=n_save)
+            kw["max_steps"] = 1_000_000
             call = lambda kw=kw: js.value_and_grad(sc, _end_loss, ["alpha", "EA"], **kw)
             try:
                 t0 = time.perf_counter()
