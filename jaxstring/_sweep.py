@@ -18,10 +18,12 @@ experiments/sweep_speed.py):
   XLA:CPU runs a call's solver loops in the dispatching thread, so the CPU devices
   of ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` run theirs one after the
   other (a thread per device ran them at the same time, but deadlocked inside
-  XLA:CPU on vmapped BDF groups of 8 members or more). (`jax.shard_map` would be
-  the one-program form, but lineax's structure check fails on the manual-mesh
-  shapes inside it, and a jit over `NamedSharding` inputs turns the batched loop
-  predicate into a cross-device reduction every step.)
+  XLA:CPU on vmapped BDF groups of 8 members or more). (`jax.shard_map`, the
+  one-program form, needs `check_vma=False` for the solver loops; it runs the two
+  CPU shards side by side -- 64 members of the k = 40 pendulum, BDF in groups of
+  16: 0.86 s against 1.89 s on one device -- but deadlocks the same way on a
+  k = 8 string, every thread idle. A jit over `NamedSharding` inputs turns the
+  batched loop predicate into a cross-device reduction every step.)
 * compiler options: the sweeps compile without XLA:CPU's YNNPACK fusions
   (`jaxstring._jit.cpu_jit`), which run the small reductions of vmapped string
   models several times slower (one group of 64 members: 4.98 s -> 2.64 s).
