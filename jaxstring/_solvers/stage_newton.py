@@ -84,6 +84,7 @@ class _StageState(eqx.Module):
     step: Scalar
     n_jac: Scalar
     refresh_next: Any
+    y_init: PyTree[Any]  # this solve's starting guess (see `postprocess`)
 
 
 def _to_y_units(diff, y_new, args):
@@ -260,6 +261,7 @@ class StageNewton(optx.AbstractRootFinder):
             step=jnp.array(0),
             n_jac=jnp.array(1),
             refresh_next=jnp.array(False),
+            y_init=y,
         )
 
     def step(self, fn, y, args, options, state, tags):
@@ -316,6 +318,10 @@ class StageNewton(optx.AbstractRootFinder):
             step=state.step + 1,
             n_jac=n_jac,
             refresh_next=refresh_next & (not self.newton),
+            # (a state passed in by diffrax comes from another stage's solve)
+            y_init=jtu.tree_map(
+                lambda a, b: jnp.where(state.step == 0, a, b), y, state.y_init
+            ),
         )
         return new_y, new_state, aux
 
@@ -352,6 +358,13 @@ class StageNewton(optx.AbstractRootFinder):
         return terminate, result
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        # A failed iteration returns its starting guess, not its last iterate: the
+        # step is rejected either way, but differentiated (forward mode) the stage is
+        # linearised at the value returned, and a diverged iterate can make that
+        # linearisation non-finite, which lineax refuses with an error that ends the
+        # whole solve (the slack-and-snap pendulum at its first snap, Kvaerno5).
+        ok = result == optx.RESULTS.successful
+        y = jtu.tree_map(lambda a, b: jnp.where(ok, a, b), y, state.y_init)
         return y, aux, {}
 
 
