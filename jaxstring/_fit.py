@@ -26,7 +26,6 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
-import jax.lax as lax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -34,16 +33,20 @@ import optax
 
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._sensitivity import SensitivityAdjoint, sensitivity_solve
+from ._sensitivity import SensitivityAdjoint, derivatives
 from ._simulate import (
     ADJOINTS as ADJOINTS,
     SolveConfig,
     make_adjoint,
     solve,
-    solver_parts,
 )
-from ._trajectory import Trajectory
-from ._validate import check_int, check_nonnegative, check_positive, check_times
+from ._validate import (
+    check_choice,
+    check_int,
+    check_nonnegative,
+    check_positive,
+    check_times,
+)
 
 
 # --------------------------------------------------------------------------------------
@@ -247,35 +250,17 @@ def _forward_mode(f):
 
 def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
     """Loss and gradient from the sensitivities integrated with the state
-    (`jaxstring._sensitivity`): the loss of the saved states, differentiated along
-    (S_j, e_j) for each optimised scalar j."""
+    (`jaxstring._sensitivity.derivatives`)."""
     flat, unravel = jfu.ravel_pytree(theta)
     scene_of = lambda x: eqx.combine(_from_theta(unravel(x), pos), frozen)
-    scene = scene_of(flat)
     if ts is None:
-        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
-    solver, controller, dt0 = solver_parts(scene, config)
-    # Each direction is its parameter's own magnitude (log-parameters: 1), so the
-    # sensitivities have the state's scale and its error control fits them.
+        sc = scene_of(flat)
+        ts = jnp.linspace(sc.t0, sc.t1, config.n_save)
     is_log = jfu.ravel_pytree(
         jtu.tree_map(lambda x, p: jnp.full(jnp.shape(x), p), theta, pos)
     )[0]
-    scale = jnp.where(is_log | (flat == 0), 1.0, jnp.abs(flat))
-    scale = lax.stop_gradient(scale)
-    directions = jnp.diag(scale)
-    ys, S, sol = sensitivity_solve(
-        scene_of, flat, directions, solver, controller, ts, config.max_steps, dt0
-    )
-
-    def loss_of(ys_, x):
-        sc = scene_of(x)
-        traj = Trajectory.from_solution(ts, ys_, sol.result, sol.stats, sc)
-        return loss_fn(traj, sc)
-
-    value, grad = jax.vmap(
-        lambda s, e: jax.jvp(loss_of, (ys, flat), (s, e)), out_axes=(None, 0)
-    )(S, directions)
-    return value, unravel(grad / scale)
+    value, grad = derivatives(scene_of, flat, is_log, config, ts, loss_fn)
+    return value, unravel(grad)
 
 
 def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
@@ -628,6 +613,7 @@ def gauss_newton(
     n_save: int = 201,
     max_steps: int = 200_000,
     project: bool = True,
+    adjoint: str = "forward",
 ) -> dict:
     """Gauss-Newton covariance of a least-squares fit at `scene`.
 
@@ -635,7 +621,9 @@ def gauss_newton(
     measurement) and measurement noise `sigma` (default: estimated from the residual,
     s^2 = |r|^2 / (n - p)), the Hessian of the negative log-likelihood is
     H = J^T J / sigma^2 and cov(p) = H^{-1}. J is computed in forward mode (one JVP per
-    parameter, diffrax `ForwardMode`).
+    parameter, diffrax `ForwardMode`), or with `adjoint="sensitivity"` from the
+    sensitivities integrated beside the state under the solver's error control (as
+    for `fit`; not for projecting models).
 
     **Returns:** dict with `names`, `values` (p), `std` (standard deviations, in the
     parameters' units), `cov` (p x p), `J` (residuals x p), `sigma`.
@@ -651,9 +639,16 @@ def gauss_newton(
     getters = [resolve(scene, p) for p in params]
     if sigma is not None:
         check_positive("sigma", sigma)
+    check_choice("adjoint", adjoint, ("forward", "sensitivity"))
+    if adjoint == "sensitivity" and project and scene.model.projects:
+        raise ValueError(
+            "`adjoint='sensitivity'` does not fit a model that projects onto its "
+            f"constraint ({type(scene.model).__name__}); use 'forward' or "
+            "project=False."
+        )
     config = SolveConfig(
         **_solve_options(solver, rtol, atol, n_save, None, max_steps, project),
-        adjoint=dfx.ForwardMode(),
+        adjoint=make_adjoint(adjoint),
     )
     if ts is not None:
         check_times("ts", ts, scene.t0, scene.t1)
@@ -679,12 +674,21 @@ def gauss_newton(
 
 @cpu_jit
 def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
-    def res(p):
-        sc = eqx.tree_at(
-            lambda s: [g(s) for g in getters],
-            scene,
-            [p[i] for i in range(len(getters))],
+    def scene_of(p):
+        return eqx.tree_at(
+            lambda s: [g(s) for g in getters], scene, [p[i] for i in range(len(p))]
         )
-        return jnp.ravel(residual_fn(solve(sc, config, ts), sc))
+
+    flat_residual = lambda traj, sc: jnp.ravel(residual_fn(traj, sc))
+    if isinstance(config.adjoint, SensitivityAdjoint):
+        if ts is None:
+            ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+        is_log = jnp.zeros(p0.shape, dtype=bool)
+        r, d = derivatives(scene_of, p0, is_log, config, ts, flat_residual)
+        return d.T, r
+
+    def res(p):
+        sc = scene_of(p)
+        return flat_residual(solve(sc, config, ts), sc)
 
     return jax.jacfwd(res)(p0), res(p0)

@@ -5,7 +5,10 @@ leaves with optimistix's Levenberg-Marquardt. Each iteration takes one forward s
 and the Jacobian of the residuals in forward mode (one JVP per parameter, through the
 solver: diffrax `ForwardMode`); for a few parameters that is far cheaper than the
 reverse-mode gradients of a first-order optimiser (`fit`), and LM converges in
-ten-odd iterations where Adam needs hundreds of steps.
+ten-odd iterations where Adam needs hundreds of steps. With `adjoint="sensitivity"`
+the Jacobian comes instead from the sensitivities integrated beside the state under
+the solver's error control (`jaxstring._sensitivity`), for motions whose derivative
+the state's own steps do not resolve.
 
 Positive parameters are fitted as log p (relative steps; p never crosses 0). At the
 optimum the Gauss-Newton covariance cov(p) = sigma^2 (J^T J)^{-1} gives the standard
@@ -26,8 +29,9 @@ import optimistix as optx
 
 from ._fit import _solve_options, resolve, resolve_params
 from ._scene import Scene
+from ._sensitivity import derivatives
 from ._simulate import SolveConfig, solve
-from ._validate import check_int, check_positive, check_times, show
+from ._validate import check_choice, check_int, check_positive, check_times, show
 
 
 class LeastSquaresResult(eqx.Module):
@@ -90,6 +94,9 @@ class _Problem(eqx.Module):
     residual_fn: Any
     config: SolveConfig
     ts: Any
+    # The residuals' derivatives from sensitivities integrated with the state
+    # (`adjoint="sensitivity"`), else forward mode through the solve.
+    sensitivity: bool = eqx.field(static=True, default=False)
 
     def values(self, theta):
         return [jnp.exp(t) if pos else t for t, pos in zip(theta, self.positive)]
@@ -101,8 +108,13 @@ class _Problem(eqx.Module):
         return eqx.tree_at(lambda s: [g(s) for g in self.getters], scene, vals)
 
     def residual(self, theta, scene):
+        if self.sensitivity:
+            return _sensitivity_residual(self, jnp.stack(theta), scene)
         sc = self.with_values(scene, theta)
         return jnp.ravel(self.residual_fn(solve(sc, self.config, self.ts), sc))
+
+    def flat_residual(self, traj, sc):
+        return jnp.ravel(self.residual_fn(traj, sc))
 
     def residuals(self, theta, args=None):
         del args
@@ -113,6 +125,29 @@ class _Problem(eqx.Module):
         for scene in self.scenes:
             out.append(self.residual(theta, scene))
         return jnp.concatenate(out)
+
+
+@eqx.filter_custom_jvp
+def _sensitivity_residual(problem, x, scene):
+    """The residuals at the parameters `x` (theta, stacked), with a JVP from the
+    sensitivities integrated beside the state (along `x` only)."""
+    sc = problem.with_values(scene, list(x))
+    return problem.flat_residual(solve(sc, problem.config, problem.ts), sc)
+
+
+@_sensitivity_residual.def_jvp
+def _sensitivity_residual_jvp(primals, tangents):
+    problem, x, scene = primals
+    tx = tangents[1]
+    r, d = derivatives(
+        lambda xx: problem.with_values(scene, list(xx)),
+        x,
+        jnp.asarray(problem.positive),
+        problem.config,
+        problem.ts,
+        problem.flat_residual,
+    )
+    return r, d.T @ (jnp.zeros_like(x) if tx is None else tx)
 
 
 @eqx.filter_jit
@@ -189,6 +224,7 @@ def least_squares(
     max_steps: int = 200_000,
     max_iters: int = 50,
     tol: float = 1e-8,
+    adjoint: str = "forward",
     verbose: bool = False,
 ) -> LeastSquaresResult:
     """Fit parameter leaves of a scene to measurements by nonlinear least squares.
@@ -213,6 +249,11 @@ def least_squares(
     - `sigma`: the measurement noise for the covariance (default: estimated).
     - `max_iters`, `tol`: Levenberg-Marquardt's iteration limit and its relative
       and absolute tolerance on the parameters (in log p where positive).
+    - `adjoint`: how the Jacobian of the residuals is computed: `"forward"`
+      (forward mode through the solve) or `"sensitivity"` (the sensitivities
+      integrated beside the state under the solver's error control: accurate where
+      the state's own steps do not resolve the derivative, as through slack-and-snap
+      motions; not for projecting models).
     - `verbose`: print the result.
 
     **Returns:** a `LeastSquaresResult`. A fit that does not converge says so and
@@ -250,6 +291,14 @@ def least_squares(
     check_int("max_iters", max_iters, 1)
     if sigma is not None:
         check_positive("sigma", sigma)
+    check_choice("adjoint", adjoint, ("forward", "sensitivity"))
+    if adjoint == "sensitivity":
+        for sc in scenes:
+            if sc.model.projects:
+                raise ValueError(
+                    "`adjoint='sensitivity'` does not fit a model that projects onto "
+                    f"its constraint ({type(sc.model).__name__}); use 'forward'."
+                )
     config = SolveConfig(
         **_solve_options(solver, rtol, atol, max_steps=max_steps),
         adjoint=dfx.ForwardMode(),
@@ -261,7 +310,16 @@ def least_squares(
             check_times("ts", ts, sc.t0, sc.t1)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
-    problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
+    problem = _Problem(
+        scenes,
+        stacked,
+        getters,
+        positive,
+        residual_fn,
+        config,
+        ts,
+        sensitivity=adjoint == "sensitivity",
+    )
     theta0 = [
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)

@@ -26,7 +26,9 @@ from collections.abc import Callable
 import diffrax as dfx
 import equinox as eqx
 import jax
+import jax.lax as lax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 
 from ._scene import Scene, scene_vector_field
 
@@ -104,3 +106,34 @@ def sensitivity_solve(
     )
     ys, S = jax.vmap(field.split)(sol.ys)
     return ys, jnp.moveaxis(S, 1, 0), sol
+
+
+def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
+    """`out_fn(traj, scene)` at the scene `scene_of(x)` and its derivatives with
+    respect to each entry of the flat parameter vector `x`, stacked on a leading
+    axis, from one solve of the state and its sensitivities.
+
+    `config` is the solve's `SolveConfig`, `ts` the save times of `traj`. Each
+    direction is its parameter's own magnitude (1 where `is_log`: log-parameters,
+    and for a zero value), so that the sensitivities have the state's scale and its
+    error control fits them."""
+    from ._simulate import solver_parts
+    from ._trajectory import Trajectory
+
+    scene = scene_of(x)
+    solver, controller, dt0 = solver_parts(scene, config)
+    scale = lax.stop_gradient(jnp.where(is_log | (x == 0), 1.0, jnp.abs(x)))
+    directions = jnp.diag(scale)
+    ys, S, sol = sensitivity_solve(
+        scene_of, x, directions, solver, controller, ts, config.max_steps, dt0
+    )
+
+    def out_of(ys_, xx):
+        sc = scene_of(xx)
+        return out_fn(Trajectory.from_solution(ts, ys_, sol.result, sol.stats, sc), sc)
+
+    value, d = jax.vmap(
+        lambda s, e: jax.jvp(out_of, (ys, x), (s, e)), out_axes=(None, 0)
+    )(S, directions)
+    unscale = lambda a: a / scale.reshape((-1,) + (1,) * (a.ndim - 1))
+    return value, jtu.tree_map(unscale, d)

@@ -479,6 +479,11 @@ CASES = [
         ["`adjoint='sensitivity'`", "NaturalTangentString", "project=False"],
     ),
     (
+        "gauss_newton-adjoint",
+        lambda: js.gauss_newton(pendulum(), residuals, ["EA"], adjoint="reverse"),
+        ["adjoint", "'reverse'", "'sensitivity'"],
+    ),
+    (
         "gauss_newton-sigma",
         lambda: js.gauss_newton(pendulum(), residuals, ["EA"], sigma=0.0),
         ["`sigma`", "0.0", "> 0"],

@@ -94,6 +94,49 @@ class _TwoData(eqx.Module):
         return (traj.end_mass - data).ravel()
 
 
+def test_sensitivity_jacobians_recover_the_parameters_and_the_covariance():
+    # The Jacobian from sensitivities integrated beside the state (under the error
+    # control) against forward mode through the solve, on a smooth motion where
+    # both resolve it: the same optimum and the same Gauss-Newton covariance.
+    start = _scene(EA=1.4e3, alpha=0.03)
+    kw = dict(ts=TS, sigma=1e-4)
+    fwd = js.least_squares(start, js.Misfit(_data()), ["alpha", "EA"], **kw)
+    sens = js.least_squares(
+        start, js.Misfit(_data()), ["alpha", "EA"], adjoint="sensitivity", **kw
+    )
+    assert sens.converged, sens.message
+    assert sens.values["alpha"] == pytest.approx(TRUTH["alpha"], rel=1e-4)
+    assert sens.values["EA"] == pytest.approx(TRUTH["EA"], rel=1e-4)
+    np.testing.assert_allclose(sens.cov, fwd.cov, rtol=1e-4)
+
+
+def test_gauss_newton_jacobians_agree_between_forward_mode_and_sensitivities():
+    # gauss_newton's Jacobian in the parameters' own units, both ways, against
+    # central differences of tight solves (rtol 1e-11), column by column.
+    sc = _scene()
+    misfit = js.Misfit(_data() + 1e-4)
+    kw = dict(ts=TS, sigma=1e-4)
+    fwd = js.gauss_newton(sc, misfit, ["alpha", "EA"], **kw)
+    sens = js.gauss_newton(sc, misfit, ["alpha", "EA"], adjoint="sensitivity", **kw)
+
+    def residuals(alpha, EA):
+        s = _scene(alpha=alpha, EA=EA)
+        traj = js.simulate(s, "rodas5p", rtol=1e-11, atol=1e-11, ts=TS)
+        return np.asarray(misfit(traj, s)).ravel()
+
+    a, e = TRUTH["alpha"], TRUTH["EA"]
+    fd = np.stack(
+        [
+            (residuals(1.0001 * a, e) - residuals(0.9999 * a, e)) / (2e-4 * a),
+            (residuals(a, 1.0001 * e) - residuals(a, 0.9999 * e)) / (2e-4 * e),
+        ],
+        axis=1,
+    )
+    for J in (fwd["J"], sens["J"]):
+        err = np.linalg.norm(J - fd, axis=0) / np.linalg.norm(fd, axis=0)
+        assert np.all(err < 1e-4), err
+
+
 def test_an_iteration_limit_is_reported_not_raised():
     start = _scene(EA=1.4e3, alpha=0.03)
     res = js.least_squares(
@@ -115,6 +158,14 @@ def test_an_iteration_limit_is_reported_not_raised():
         (dict(params=[]), "params"),
         (dict(rtol=-1.0), "rtol"),
         (dict(max_iters=0), "max_iters"),
+        (dict(adjoint="reverse"), "adjoint"),
+        (
+            dict(
+                scene=js.pendulum.string_pendulum("natural", k=4, t1=0.3),
+                adjoint="sensitivity",
+            ),
+            "NaturalTangentString",
+        ),
     ],
 )
 def test_bad_input_names_the_argument(kwargs, match):
