@@ -253,9 +253,6 @@ def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
     (`jaxstring._sensitivity.derivatives`)."""
     flat, unravel = jfu.ravel_pytree(theta)
     scene_of = lambda x: eqx.combine(_from_theta(unravel(x), pos), frozen)
-    if ts is None:
-        sc = scene_of(flat)
-        ts = jnp.linspace(sc.t0, sc.t1, config.n_save)
     is_log = jfu.ravel_pytree(
         jtu.tree_map(lambda x, p: jnp.full(jnp.shape(x), p), theta, pos)
     )[0]
@@ -681,8 +678,6 @@ def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
 
     flat_residual = lambda traj, sc: jnp.ravel(residual_fn(traj, sc))
     if isinstance(config.adjoint, SensitivityAdjoint):
-        if ts is None:
-            ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
         is_log = jnp.zeros(p0.shape, dtype=bool)
         r, d = derivatives(scene_of, p0, is_log, config, ts, flat_residual)
         return d.T, r

@@ -20,7 +20,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -29,8 +28,8 @@ import optimistix as optx
 
 from ._fit import _solve_options, resolve, resolve_params
 from ._scene import Scene
-from ._sensitivity import derivatives
-from ._simulate import SolveConfig, solve
+from ._sensitivity import SensitivityAdjoint, derivatives
+from ._simulate import SolveConfig, make_adjoint, solve
 from ._validate import check_choice, check_int, check_positive, check_times, show
 
 
@@ -94,9 +93,6 @@ class _Problem(eqx.Module):
     residual_fn: Any
     config: SolveConfig
     ts: Any
-    # The residuals' derivatives from sensitivities integrated with the state
-    # (`adjoint="sensitivity"`), else forward mode through the solve.
-    sensitivity: bool = eqx.field(static=True, default=False)
 
     def values(self, theta):
         return [jnp.exp(t) if pos else t for t, pos in zip(theta, self.positive)]
@@ -108,7 +104,9 @@ class _Problem(eqx.Module):
         return eqx.tree_at(lambda s: [g(s) for g in self.getters], scene, vals)
 
     def residual(self, theta, scene):
-        if self.sensitivity:
+        # `adjoint="sensitivity"`: derivatives from sensitivities integrated with
+        # the state; else forward mode through the solve.
+        if isinstance(self.config.adjoint, SensitivityAdjoint):
             return _sensitivity_residual(self, jnp.stack(theta), scene)
         sc = self.with_values(scene, theta)
         return jnp.ravel(self.residual_fn(solve(sc, self.config, self.ts), sc))
@@ -301,7 +299,7 @@ def least_squares(
                 )
     config = SolveConfig(
         **_solve_options(solver, rtol, atol, max_steps=max_steps),
-        adjoint=dfx.ForwardMode(),
+        adjoint=make_adjoint(adjoint),
     )
     if ts is None:
         ts = jnp.linspace(scenes[0].t0, scenes[0].t1, 201)
@@ -310,16 +308,7 @@ def least_squares(
             check_times("ts", ts, sc.t0, sc.t1)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
-    problem = _Problem(
-        scenes,
-        stacked,
-        getters,
-        positive,
-        residual_fn,
-        config,
-        ts,
-        sensitivity=adjoint == "sensitivity",
-    )
+    problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
     theta0 = [
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)

@@ -113,7 +113,8 @@ def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
     respect to each entry of the flat parameter vector `x`, stacked on a leading
     axis, from one solve of the state and its sensitivities.
 
-    `config` is the solve's `SolveConfig`, `ts` the save times of `traj`. Each
+    `config` is the solve's `SolveConfig`, `ts` the save times of `traj` (None:
+    `config.n_save` over the span). Each
     direction is its parameter's own magnitude (1 where `is_log`: log-parameters,
     and for a zero value), so that the sensitivities have the state's scale and its
     error control fits them."""
@@ -121,6 +122,8 @@ def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
     from ._trajectory import Trajectory
 
     scene = scene_of(x)
+    if ts is None:
+        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
     solver, controller, dt0 = solver_parts(scene, config)
     scale = lax.stop_gradient(jnp.where(is_log | (x == 0), 1.0, jnp.abs(x)))
     directions = jnp.diag(scale)
