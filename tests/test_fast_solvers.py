@@ -12,6 +12,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit, _linalg
+from jaxstring._solvers.esdirk import ESDIRK
 from jaxstring._solvers.fixed_step import Newmark, ThetaMethod
 from jaxstring._solvers.rosenbrock import Rodas5P
 from jaxstring._solvers.stage_newton import StageNewton
@@ -90,7 +91,10 @@ def test_rodas5p_order_five_on_nonlinear_problem():
     assert 4.6 < slope < 5.4, (slope, errs)
 
 
-def test_rodas5p_stiff_prothero_robinson():
+@pytest.mark.parametrize(
+    "solver", [Rodas5P(), ESDIRK(method="kvaerno5", rtol=1e-7, atol=1e-7)]
+)
+def test_stiff_prothero_robinson(solver):
     # y' = lam (y - g) + g', exact y = g = sin t, lam = -1e6: the step size must be
     # set by the smooth solution, not by lam (an explicit method would need ~1e6
     # steps), and the steps must stay accurate (stiff accuracy).
@@ -102,7 +106,7 @@ def test_rodas5p_stiff_prothero_robinson():
 
     sol = dfx.diffeqsolve(
         dfx.ODETerm(vf),
-        Rodas5P(),
+        solver,
         0.0,
         3.0,
         1e-3,

@@ -9,6 +9,7 @@ import jax.tree_util as jtu
 from .._validate import check_choice
 from .bdf import BDF
 from .diffrax_compat import EVERY_STAGE
+from .esdirk import ESDIRK
 from .fixed_step import Newmark, ThetaMethod
 from .rosenbrock import Rodas5P
 from .stage_newton import StageNewton
@@ -70,7 +71,11 @@ _MAX_ITERS_ADAPTIVE = 10
 # had been held down by Newton failures. In natural variables, whose stiff force is
 # linear in the state, the step's Jacobian serves every stage and the extra ones
 # only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
-# the model chooses (`AbstractModel.stage_jacobians`).
+# the model chooses (`AbstractModel.stage_jacobians`). Where one Jacobian per
+# step serves, `build_solver` gives the written-out ESDIRK of `esdirk.py` (same
+# tableaux, about half the time per step); the classes below remain for a
+# Jacobian per stage and for `sweep`'s lockstep mode, whose stage solves factorise
+# per member (`StageNewton(linear_solver="batched")`).
 class Kvaerno3(dfx.Kvaerno3):
     """diffrax's Kvaerno3 with a Jacobian at every implicit stage's predictor."""
 
@@ -145,7 +150,9 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
         rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_ADAPTIVE
     )
     if solver in KVAERNO:
-        return kvaerno_class(solver, scene)(
+        if not scene.model.stage_jacobians(scene.effects):
+            return ESDIRK(method=solver, rtol=newton_rtol, atol=newton_atol)
+        return KVAERNO[solver](
             root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
         )
     if solver == "implicit_euler":

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import optimistix as optx
 
+from .esdirk import ESDIRK
 from .rosenbrock import Rodas5P
 
 
@@ -107,9 +108,13 @@ def make_controller(
     `norm`: the error norm (`sweep`'s lockstep mode passes its member-wise max)."""
     if not adaptive:
         return dfx.ConstantStepSize()
-    newton = (isinstance(solver, str) and solver in NEWTON_STAGE_SOLVERS) or (
-        isinstance(solver, dfx.AbstractImplicitSolver)
-        and isinstance(solver, dfx.AbstractRungeKutta)
+    newton = (
+        (isinstance(solver, str) and solver in NEWTON_STAGE_SOLVERS)
+        or isinstance(solver, ESDIRK)
+        or (
+            isinstance(solver, dfx.AbstractImplicitSolver)
+            and isinstance(solver, dfx.AbstractRungeKutta)
+        )
     )
     if step_control == "newton-limited" or (step_control == "auto" and newton):
         return NewtonLimitedController(rtol=rtol, atol=atol, norm=norm)
