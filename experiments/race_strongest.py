@@ -409,7 +409,7 @@ def merge(parts, repeats=3, solvers=SOLVERS, targets=TARGETS):
     forms = [f for f in FORMULATIONS + ("natural",) if any(
         r["formulation"] == f for r in rows)]  # fmt: skip
     EAs = sorted(set(r["EA"] for r in rows))
-    notes = ["Parts (one process per scene, run side by side):", *stamps]
+    notes = ["Parts (one process per scene):", *stamps]
     report(rows, "race_strongest", forms, EAs, targets, solvers, repeats, 40, 2.0,
            notes=notes)  # fmt: skip
 
