@@ -115,6 +115,19 @@ def test_fig10_quick(results_in_tmp):
 
 
 @pytest.mark.slow
+def test_esdirk_step_quick(results_in_tmp):
+    rows = _module("esdirk_step").main(quick=True)
+    by = {r["solver"]: r for r in rows}
+    mine, theirs = by["written out"], by["diffrax"]
+    assert mine["ok"] and theirs["ok"]
+    # the same tableau and controller: equally accurate (rtol 1e-6 against a
+    # Rodas5P run at 1e-11) in about as many steps
+    assert mine["err_m"] < 1e-6 and theirs["err_m"] < 1e-6
+    assert abs(mine["accepted"] - theirs["accepted"]) <= 0.2 * theirs["accepted"]
+    assert os.path.exists(os.path.join(results_in_tmp, "esdirk_step_quick.md"))
+
+
+@pytest.mark.slow
 @pytest.mark.skipif(
     not (HAS_SUNDAE and HAS_NUMBA), reason="scikit-sundae, numba (bench extra)"
 )
