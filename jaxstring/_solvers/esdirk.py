@@ -59,30 +59,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _linalg
-from .fixed_step import OneStepODESolver
-
-
-def _rms(x):
-    return jnp.sqrt(jnp.mean(x**2))
-
-
-def _combine(coeffs, vs):
-    """sum_j coeffs[j] vs[j] over the nonzero (trace-time constant) coefficients."""
-    out = None
-    for c, v in zip(coeffs, vs):
-        c = float(c)
-        if c != 0.0:
-            term = v if c == 1.0 else c * v
-            out = term if out is None else out + term
-    return out
-
-
-class _VF(eqx.Module):
-    """f(y; (t, terms, args)) -- a pytree-only callable for structure detection."""
-
-    def __call__(self, y, a):
-        t, terms, args = a
-        return terms.vf(t, y, args)
+from .fixed_step import OneStepODESolver, _rms
+from .rosenbrock import _VF, _combine
 
 
 class _Tableau(eqx.Module):
