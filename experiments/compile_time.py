@@ -6,7 +6,7 @@ compilation, and JAX's start-up is paid by a tiny warm-up solve first): the firs
 `simulate` call (trace, lower, XLA compile, run), the same call again (run only),
 and a call with other parameter values (EA x 2, alpha x 2: must not recompile, so
 it costs a run). Compile time = first call - second call. Two modes: the band of
-the Newton matrix declared by the string model (`AbstractModel.node_bandwidth`,
+the Newton matrix declared by the string model (`SolverStructure.bandwidth`,
 the default) and detected by probing (`jaxstring._linalg.banded.detect_width`, which
 compiles a probe at trace time).
 
@@ -102,7 +102,7 @@ def main(quick=False):
             "in a fresh process after a tiny warm-up solve (JAX start-up).",
             "other_values_s: a third call with EA and alpha doubled; recompiled: "
             "whether it cost about a compilation (it must not).",
-            "band declared: the string model's node_bandwidth (default); detected: "
+            "band declared: the string model's declared band (default); detected: "
             "the trace-time probe (one extra XLA compilation per new relation).",
         ],
     )

@@ -102,7 +102,7 @@ def _factorisations_per_attempt(name, scene):
     contraction come on top."""
     if name == "implicit_euler_fixed":
         return 2
-    if name.startswith("kvaerno") and scene.model.stage_jacobians(scene.effects):
+    if name.startswith("kvaerno") and scene.structure.stage_jacobians:
         return IMPLICIT_STAGES[name]
     return 1
 

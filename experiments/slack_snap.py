@@ -51,7 +51,7 @@ CASES = {
 }
 FORMULATIONS = ("displacement", "natural", "angle")
 # The preset solver of each formulation: BDF in displacement variables (where
-# Rosenbrock methods lose accuracy, jaxstring/_solvers/presets.py), Rodas5P in
+# Rosenbrock methods lose accuracy, jaxstring/_presets.py), Rodas5P in
 # natural variables.
 SOLVERS = {
     "displacement": ("bdf",),
@@ -168,7 +168,8 @@ def step_log(formulation, case, k, smoothing, solver, rtol=TOL):
     tension points whose state (taut: eps > 0) changed over each step."""
     import diffrax as dfx
 
-    from jaxstring._simulate import SolveConfig, _diffeqsolve
+    from jaxstring._integrate import solve_scene
+    from jaxstring._solve_config import SolveConfig
 
     sc = scene(formulation, case, k, smoothing)
     # `simulate`'s solver, step control and projection, saved at every step
@@ -177,7 +178,7 @@ def step_log(formulation, case, k, smoothing, solver, rtol=TOL):
     @jax.jit
     def solve(sc):
         strain = lambda t, y, a: a.model.strain(y)[0]
-        sol = _diffeqsolve(sc, config, lambda _: dfx.SaveAt(steps=True, fn=strain))
+        sol = solve_scene(sc, config, lambda _: dfx.SaveAt(steps=True, fn=strain))
         return sol.ts, sol.ys
 
     ts, eps = solve(sc)

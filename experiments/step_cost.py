@@ -32,7 +32,7 @@ from _common import new_figure, savefig, set_quick, write_table  # sets XLA_FLAG
 
 import jaxstring
 from jaxstring import _linalg
-from jaxstring._simulate import scene_vector_field
+from jaxstring._scene import scene_vector_field
 from jaxstring._solvers.bdf import BDF
 from jaxstring.pendulum.effects import AbstractStringLoad, Loads
 

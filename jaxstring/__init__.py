@@ -29,16 +29,21 @@ from ._fit import (
     gauss_newton as gauss_newton,
     value_and_grad as value_and_grad,
 )
+from ._integrate import solve as solve
 from ._least_squares import (
     LeastSquaresResult as LeastSquaresResult,
     least_squares as least_squares,
 )
 from ._model import AbstractModel as AbstractModel
+from ._presets import ACCURACY_PRESETS as ACCURACY_PRESETS, preset as preset
 from ._scene import Scene as Scene
-from ._simulate import SolveConfig as SolveConfig, simulate as simulate, solve as solve
+from ._simulate import simulate as simulate
+from ._solve_config import (
+    SOLVE_DEFAULTS as SOLVE_DEFAULTS,
+    SolveConfig as SolveConfig,
+)
 from ._solvers.bdf import BDF as BDF
 from ._solvers.fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
-from ._solvers.presets import ACCURACY_PRESETS as ACCURACY_PRESETS
 from ._solvers.registry import (
     SOLVERS as SOLVERS,
     Kvaerno3 as Kvaerno3,

@@ -16,7 +16,6 @@ once. `DirectAdjoint`, `BacksolveAdjoint` and forward mode (`ForwardMode`, best 
 one or two parameters and for Jacobians of residuals) can be chosen by name.
 """
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -31,22 +30,12 @@ import jax.tree_util as jtu
 import numpy as np
 import optax
 
+from ._integrate import solve
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._sensitivity import SensitivityAdjoint, derivatives
-from ._simulate import (
-    ADJOINTS as ADJOINTS,
-    SolveConfig,
-    make_adjoint,
-    solve,
-)
-from ._validate import (
-    check_choice,
-    check_int,
-    check_nonnegative,
-    check_positive,
-    check_times,
-)
+from ._sensitivity import derivatives
+from ._solve_config import SensitivityAdjoint, SolveConfig, solve_config
+from ._validate import check_int, check_nonnegative, check_positive
 
 
 # --------------------------------------------------------------------------------------
@@ -262,7 +251,7 @@ def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
 
 def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     f = lambda th: _objective(th, pos, frozen, loss_fn, config, simulate, ts)
-    adjoint = make_adjoint(config.adjoint)
+    adjoint = config.adjoint_for("gradient")
     if isinstance(adjoint, SensitivityAdjoint):
         f = _with_gradient(
             f,
@@ -293,7 +282,7 @@ def _make_step(theta, opt_state, pos, frozen, loss_fn, optimizer, config, simula
 
 
 def _count_steps(scene, config, ts) -> int:
-    traj = solve(scene, dataclasses.replace(config, adjoint=None), ts)
+    traj = solve(scene, config, ts, adjoint=dfx.RecursiveCheckpointAdjoint())
     return int(traj.stats["num_steps"])
 
 
@@ -318,35 +307,26 @@ def resolve_params(scene, params, positive):
     return getters, positive
 
 
-# The solve options of `fit` and its relatives, with their defaults, in the order
-# of `_solve_options`'s positional arguments.
-_SOLVE_DEFAULTS = {
-    "solver": "kvaerno5",
-    "rtol": 1e-8,
-    "atol": 1e-8,
-    "n_save": 201,
-    "dt0": None,
-    "max_steps": 200_000,
-    "project": True,
-}
-
-
-def _solve_options(*values, **options):
-    """The solve options of `fit` and its relatives: `values` in the order of
-    `_SOLVE_DEFAULTS`, `options` by name, the defaults for the others."""
-    unknown = sorted(set(options) - set(_SOLVE_DEFAULTS))
-    if unknown:
+def identify_config(scene, config, options, derivative, simulate=True):
+    """The `SolveConfig` of an identification solve of `scene` ("identify"
+    defaults, `config`, the shortcuts `options`), checked against the scene and
+    against the derivative it serves ("gradient" or "jacobian")."""
+    config = solve_config("identify", config, **options)
+    config.check_scene(scene)
+    if isinstance(config.adjoint_for(derivative), SensitivityAdjoint) and not simulate:
         raise ValueError(
-            f"unknown option(s) {unknown}; valid: {', '.join(_SOLVE_DEFAULTS)} "
-            "(and the function's own arguments)."
+            "`adjoint='sensitivity'` integrates the scene's sensitivities itself "
+            "and needs simulate=True (a loss that simulates itself: use "
+            "'forward' or 'recursive')."
         )
-    return _SOLVE_DEFAULTS | dict(zip(_SOLVE_DEFAULTS, values)) | options
+    return config
 
 
-def _setup(
-    scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solver_kw
-):
-    """Check the arguments of `fit`/`value_and_grad`; split the scene."""
+def _setup(scene, loss_fn, params, positive, simulate, config, count_steps):
+    """Check the arguments of `fit`/`value_and_grad`; split the scene. With
+    `count_steps`, `checkpoints="auto"` of a reverse-mode gradient becomes the
+    number of steps of one forward solve (plus a margin); without, diffrax's
+    log-depth recursion."""
     if not isinstance(scene, Scene):
         raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
     if not callable(loss_fn):
@@ -359,38 +339,14 @@ def _setup(
                 f"parameter {g.label!r} = {x} is fitted as positive (log p) and must "
                 "be > 0; give a positive initial value or positive=False for it."
             )
-    adj = make_adjoint(adjoint)
-    if isinstance(adj, SensitivityAdjoint):
-        if not simulate:
-            raise ValueError(
-                "`adjoint='sensitivity'` integrates the scene's sensitivities itself "
-                "and needs simulate=True (a loss that simulates itself: use "
-                "'forward' or 'recursive')."
-            )
-        if solver_kw.get("project", True) and scene.model.projects:
-            raise ValueError(
-                "`adjoint='sensitivity'` does not fit a model that projects onto its "
-                f"constraint ({type(scene.model).__name__}); use 'forward' or "
-                "'recursive', or project=False."
-            )
-    config = SolveConfig(adjoint=adj, **solver_kw)
-    if ts is not None:
-        check_times("ts", ts, scene.t0, scene.t1)
-        ts = jnp.asarray(ts, dtype=jnp.float64)
-    if checkpoints is not None and checkpoints != "auto":
-        check_int("checkpoints", checkpoints, 1)
-    if (
-        simulate
-        and type(adj) is dfx.RecursiveCheckpointAdjoint
-        and adj.checkpoints is None
-        and checkpoints is not None
-    ):
-        if checkpoints == "auto":
-            n = _count_steps(scene, config, ts)
-            checkpoints = max(16, int(1.1 * n) + 8)
-        check_int("checkpoints", checkpoints, 1)
-        adj = dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
-        config = SolveConfig(adjoint=adj, **solver_kw)
+    ts = config.ts
+    config = config.replace(ts=None)
+    if config.checkpoints == "auto":
+        n = None
+        adj = config.adjoint_for("gradient")
+        if simulate and count_steps and type(adj) is dfx.RecursiveCheckpointAdjoint:
+            n = max(16, int(1.1 * _count_steps(scene, config, ts)) + 8)
+        config = config.replace(checkpoints=n)
     spec = filter_spec(scene, getters)
     diff, frozen = eqx.partition(scene, spec)
     pos_tree = eqx.tree_at(lambda s: [g(s) for g in getters], spec, replace=positive)
@@ -410,25 +366,23 @@ def value_and_grad(
     loss_fn: Callable,
     params: Sequence,
     *,
-    positive: bool | Sequence[bool] = False,
     simulate: bool = True,
-    ts=None,
-    adjoint="recursive",
-    checkpoints: int | str | None = None,
-    **solve_options,
+    config: SolveConfig | None = None,
+    **options,
 ) -> tuple[float, dict]:
-    """Loss and its gradient with respect to chosen parameters, as `fit` computes them.
+    """Loss and its gradient d loss / d p with respect to chosen parameters, in the
+    parameters' own units, computed as `fit` computes them.
 
-    Arguments as for `fit`, and `solve_options` are fit's `solver`, `rtol`, `atol`,
-    `n_save`, `dt0`, `max_steps`, `project` (same defaults). With `positive=False`
-    (default) the gradient is d loss / d p in the parameters' own units; with
-    `positive=True` it is d loss / d log p (what `fit` descends).
+    Arguments as for `fit`: `config` (default: `SolveConfig.default("identify")`)
+    and its fields as shortcuts (`rtol`, `ts`, `adjoint`, ...). With
+    `checkpoints="auto"` a single gradient uses diffrax's log-depth recursion
+    (`fit` counts the steps of one forward solve instead).
 
     **Returns:** `(loss, {label: gradient})`.
     """
-    solve_kw = _solve_options(**solve_options)
+    config = identify_config(scene, config, options, "gradient", simulate)
     getters, theta, pos, frozen, config, ts = _setup(
-        scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
+        scene, loss_fn, params, False, simulate, config, count_steps=False
     )
     value, grad = _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
     return float(value), {g.label: np.asarray(g(grad)) for g in getters}
@@ -444,19 +398,11 @@ def fit(
     learning_rate: float = 0.05,
     positive: bool | Sequence[bool] = True,
     simulate: bool = True,
-    solver="kvaerno5",
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
-    ts=None,
-    n_save: int = 201,
-    dt0=None,
-    max_steps: int = 200_000,
-    project: bool = True,
-    adjoint="recursive",
-    checkpoints: int | str | None = "auto",
     gtol: float | None = None,
     print_every: int | None = 10,
     callback: Callable | None = None,
+    config: SolveConfig | None = None,
+    **options,
 ) -> FitResult:
     """Minimise `loss_fn` over chosen parameter leaves of `scene` with optax.
 
@@ -475,20 +421,19 @@ def fit(
       transformations that take extra arguments (`optax.lbfgs`) get `value`, `grad`
       and `value_fn`.
     - `positive`: optimise log p (one bool for all parameters or one per parameter).
-    - `solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `max_steps`, `project`: as for
-      `jaxstring.simulate`.
-    - `adjoint`: `"recursive"` (diffrax `RecursiveCheckpointAdjoint`, default),
-      `"direct"` (`DirectAdjoint`: small `max_steps` only), `"backsolve"`
-      (`BacksolveAdjoint`: continuous adjoint, gradients accurate to the solver
-      tolerance only; not for projecting models), `"forward"` (`ForwardMode`: one JVP
-      per parameter, no checkpoints; best for one or two parameters),
-      `"sensitivity"` (forward sensitivities integrated with the state under the
-      same error control, so the gradient is accurate where the steps chosen for the
-      state alone do not resolve it, e.g. through slack-and-snap motions; not for
-      projecting models) or a diffrax adjoint instance.
-    - `checkpoints`: for `"recursive"`: `"auto"` counts the steps of one forward run
-      and stores that many checkpoints (about one recomputation per step in the
-      backward pass); `None` is diffrax's default (log-depth recursion); or an int.
+    - `config`: the `SolveConfig` of the solves (default:
+      `SolveConfig.default("identify")`); `options`: its fields as shortcuts
+      (`solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `max_steps`, `project`,
+      ...). Its `adjoint` says how the gradient goes through the solve:
+      `"auto"`/`"recursive"` (diffrax's checkpointed reverse mode; with
+      `checkpoints="auto"`, as many checkpoints as one forward solve takes steps,
+      about one recomputation per step in the backward pass), `"direct"` (small
+      `max_steps` only), `"backsolve"` (continuous adjoint: gradients accurate to
+      the solver tolerance only), `"forward"` (one JVP per parameter: best for one
+      or two parameters), `"sensitivity"` (forward sensitivities integrated with
+      the state under the same error control, so the gradient is accurate where
+      the steps chosen for the state alone do not resolve it, e.g. through
+      slack-and-snap motions; not for projecting models) or a diffrax adjoint.
     - `gtol`: stop when the gradient norm (in the optimised variables) falls below.
     - `print_every`: print step, loss, gradient norm and values every this many
       steps (None: silent).
@@ -515,11 +460,11 @@ def fit(
             f"`callback` must be callable as callback(step, loss, scene); got "
             f"{callback!r}."
         )
-    solve_kw = _solve_options(solver, rtol, atol, n_save, dt0, max_steps, project)
+    config = identify_config(scene, config, options, "gradient", simulate)
     getters, theta, pos, frozen, config, ts = _setup(
-        scene, loss_fn, params, positive, simulate, ts, adjoint, checkpoints, solve_kw
+        scene, loss_fn, params, positive, simulate, config, count_steps=True
     )
-    adj = config.adjoint
+    adj = config.adjoint_for("gradient")
     if optimizer is None:
         optimizer = optax.adam(learning_rate)
     optimizer = optax.with_extra_args_support(optimizer)
@@ -603,14 +548,8 @@ def gauss_newton(
     params: Sequence,
     *,
     sigma: float | None = None,
-    solver="kvaerno5",
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
-    ts=None,
-    n_save: int = 201,
-    max_steps: int = 200_000,
-    project: bool = True,
-    adjoint: str = "forward",
+    config: SolveConfig | None = None,
+    **options,
 ) -> dict:
     """Gauss-Newton covariance of a least-squares fit at `scene`.
 
@@ -618,9 +557,9 @@ def gauss_newton(
     measurement) and measurement noise `sigma` (default: estimated from the residual,
     s^2 = |r|^2 / (n - p)), the Hessian of the negative log-likelihood is
     H = J^T J / sigma^2 and cov(p) = H^{-1}. J is computed in forward mode (one JVP per
-    parameter, diffrax `ForwardMode`), or with `adjoint="sensitivity"` from the
-    sensitivities integrated beside the state under the solver's error control (as
-    for `fit`; not for projecting models).
+    parameter; `adjoint` "auto" or "forward"), or with `adjoint="sensitivity"` from
+    the sensitivities integrated beside the state under the solver's error control
+    (as for `fit`; not for projecting models). `config` and `options` as for `fit`.
 
     **Returns:** dict with `names`, `values` (p), `std` (standard deviations, in the
     parameters' units), `cov` (p x p), `J` (residuals x p), `sigma`.
@@ -629,29 +568,14 @@ def gauss_newton(
         raise ValueError(f"`scene` must be a jaxstring Scene; got {type(scene)}.")
     if not callable(residual_fn):
         raise ValueError("`residual_fn` must be callable: residual_fn(traj, scene).")
-    if isinstance(params, str) or callable(params):
-        params = [params]
-    if len(params) == 0:
-        raise ValueError("`params` must name at least one parameter.")
-    getters = [resolve(scene, p) for p in params]
+    getters, _ = resolve_params(scene, params, False)
     if sigma is not None:
         check_positive("sigma", sigma)
-    check_choice("adjoint", adjoint, ("forward", "sensitivity"))
-    if adjoint == "sensitivity" and project and scene.model.projects:
-        raise ValueError(
-            "`adjoint='sensitivity'` does not fit a model that projects onto its "
-            f"constraint ({type(scene.model).__name__}); use 'forward' or "
-            "project=False."
-        )
-    config = SolveConfig(
-        **_solve_options(solver, rtol, atol, n_save, None, max_steps, project),
-        adjoint=make_adjoint(adjoint),
-    )
-    if ts is not None:
-        check_times("ts", ts, scene.t0, scene.t1)
+    config = identify_config(scene, config, options, "jacobian")
+    check_jacobian_adjoint(config)
+    ts = config.save_times(scene.t0, scene.t1)
+    config = config.replace(ts=None)
     p0 = jnp.stack([jnp.asarray(g(scene), dtype=jnp.float64) for g in getters])
-    if ts is not None:
-        ts = jnp.asarray(ts, dtype=jnp.float64)
     J, r = _gn_jacobian(p0, scene, tuple(getters), residual_fn, config, ts)
     J, r = np.asarray(J), np.asarray(r)
     n, m = r.size, p0.size
@@ -669,6 +593,16 @@ def gauss_newton(
     }
 
 
+def check_jacobian_adjoint(config: SolveConfig) -> None:
+    """Refuse an adjoint that cannot give the Jacobian of residuals (the reverse
+    modes), naming the valid ones."""
+    if not isinstance(config.adjoint_for("jacobian"), dfx.ForwardMode):
+        raise ValueError(
+            "`adjoint` of a residual Jacobian must be 'auto', 'forward' or "
+            f"'sensitivity'; got {config.adjoint!r}."
+        )
+
+
 @cpu_jit
 def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
     def scene_of(p):
@@ -677,13 +611,14 @@ def _gn_jacobian(p0, scene, getters, residual_fn, config, ts):
         )
 
     flat_residual = lambda traj, sc: jnp.ravel(residual_fn(traj, sc))
-    if isinstance(config.adjoint, SensitivityAdjoint):
+    adjoint = config.adjoint_for("jacobian")
+    if isinstance(adjoint, SensitivityAdjoint):
         is_log = jnp.zeros(p0.shape, dtype=bool)
         r, d = derivatives(scene_of, p0, is_log, config, ts, flat_residual)
         return d.T, r
 
     def res(p):
         sc = scene_of(p)
-        return flat_residual(solve(sc, config, ts), sc)
+        return flat_residual(solve(sc, config, ts, adjoint=adjoint), sc)
 
     return jax.jacfwd(res)(p0), res(p0)

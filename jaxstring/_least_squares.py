@@ -26,11 +26,12 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._fit import _solve_options, resolve, resolve_params
+from ._fit import check_jacobian_adjoint, identify_config, resolve, resolve_params
+from ._integrate import solve
 from ._scene import Scene
-from ._sensitivity import SensitivityAdjoint, derivatives
-from ._simulate import SolveConfig, make_adjoint, solve
-from ._validate import check_choice, check_int, check_positive, check_times, show
+from ._sensitivity import derivatives
+from ._solve_config import SensitivityAdjoint, SolveConfig
+from ._validate import check_int, check_positive, show
 
 
 class LeastSquaresResult(eqx.Module):
@@ -106,10 +107,12 @@ class _Problem(eqx.Module):
     def residual(self, theta, scene):
         # `adjoint="sensitivity"`: derivatives from sensitivities integrated with
         # the state; else forward mode through the solve.
-        if isinstance(self.config.adjoint, SensitivityAdjoint):
+        adjoint = self.config.adjoint_for("jacobian")
+        if isinstance(adjoint, SensitivityAdjoint):
             return _sensitivity_residual(self, jnp.stack(theta), scene)
         sc = self.with_values(scene, theta)
-        return jnp.ravel(self.residual_fn(solve(sc, self.config, self.ts), sc))
+        traj = solve(sc, self.config, self.ts, adjoint=adjoint)
+        return jnp.ravel(self.residual_fn(traj, sc))
 
     def flat_residual(self, traj, sc):
         return jnp.ravel(self.residual_fn(traj, sc))
@@ -212,18 +215,14 @@ def least_squares(
     residual_fn: Callable,
     params: Sequence,
     *,
-    ts=None,
-    solver="kvaerno5",
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
     bounds: dict | None = None,
     positive: bool | Sequence[bool] = True,
     sigma: float | None = None,
-    max_steps: int = 200_000,
     max_iters: int = 50,
     tol: float = 1e-8,
-    adjoint: str = "forward",
     verbose: bool = False,
+    config: SolveConfig | None = None,
+    **options,
 ) -> LeastSquaresResult:
     """Fit parameter leaves of a scene to measurements by nonlinear least squares.
 
@@ -239,20 +238,22 @@ def least_squares(
       it closes over are compiled in as constants; an `eqx.Module` with array fields
       is traced (new data reuse the compiled fit).
     - `params`: the leaves to fit, by name, path or callable, as in `fit`.
-    - `ts`: the save times the residuals use (default: 201 points over the span).
-    - `solver`, `rtol`, `atol`, `max_steps`: of the forward solves, as in `simulate`.
     - `bounds`: dict label -> (low, high); the start must lie inside. The fitted
       values are checked against them (`converged` is False outside).
     - `positive`: fit log p (one bool, or one per parameter).
     - `sigma`: the measurement noise for the covariance (default: estimated).
     - `max_iters`, `tol`: Levenberg-Marquardt's iteration limit and its relative
       and absolute tolerance on the parameters (in log p where positive).
-    - `adjoint`: how the Jacobian of the residuals is computed: `"forward"`
-      (forward mode through the solve) or `"sensitivity"` (the sensitivities
-      integrated beside the state under the solver's error control: accurate where
-      the state's own steps do not resolve the derivative, as through slack-and-snap
-      motions; not for projecting models).
     - `verbose`: print the result.
+    - `config`: the `SolveConfig` of the forward solves (default:
+      `SolveConfig.default("identify")`); `options`: its fields as shortcuts
+      (`ts`, the save times the residuals use; `solver`, `rtol`, `atol`,
+      `max_steps`, ...). Its `adjoint` says how the Jacobian of the residuals is
+      computed: `"auto"`/`"forward"` (forward mode through the solve) or
+      `"sensitivity"` (the sensitivities integrated beside the state under the
+      solver's error control: accurate where the state's own steps do not resolve
+      the derivative, as through slack-and-snap motions; not for projecting
+      models).
 
     **Returns:** a `LeastSquaresResult`. A fit that does not converge says so and
     why (`converged`, `message`); it does not raise.
@@ -283,30 +284,16 @@ def least_squares(
             )
         starts.append(v)
     bounds = _check_bounds(bounds, labels, starts)
-    check_positive("rtol", rtol)
-    check_positive("atol", atol)
     check_positive("tol", tol)
     check_int("max_iters", max_iters, 1)
     if sigma is not None:
         check_positive("sigma", sigma)
-    check_choice("adjoint", adjoint, ("forward", "sensitivity"))
-    if adjoint == "sensitivity":
-        for sc in scenes:
-            if sc.model.projects:
-                raise ValueError(
-                    "`adjoint='sensitivity'` does not fit a model that projects onto "
-                    f"its constraint ({type(sc.model).__name__}); use 'forward'."
-                )
-    config = SolveConfig(
-        **_solve_options(solver, rtol, atol, max_steps=max_steps),
-        adjoint=make_adjoint(adjoint),
-    )
-    if ts is None:
-        ts = jnp.linspace(scenes[0].t0, scenes[0].t1, 201)
-    else:
-        for sc in scenes:
-            check_times("ts", ts, sc.t0, sc.t1)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
+    config = identify_config(scenes[0], config, options, "jacobian")
+    for sc in scenes[1:]:
+        config.check_scene(sc)
+    check_jacobian_adjoint(config)
+    ts = config.save_times(scenes[0].t0, scenes[0].t1)
+    config = config.replace(ts=None)
     stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
     problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
     theta0 = [

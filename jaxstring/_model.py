@@ -7,6 +7,35 @@ import equinox as eqx
 from jaxtyping import Array
 
 
+class SolverStructure(eqx.Module):
+    """What a model tells the implicit solvers about its vector field.
+
+    **Fields** (all structure, none traced):
+
+    - `bandwidth`: w when the state is node-major `(n, b)` and node i couples only
+      to nodes i - w ... i + w; None: the solvers detect the band by probing (one
+      extra compilation at trace time).
+    - `second_order`: d > 0 when every node row is (q, v) with d components each
+      and `vector_field` returns exactly v as dq/dt: Newton systems are then
+      reduced to the velocities (blocks of d instead of 2 d). 0: no such layout.
+    - `stage_jacobians`: an implicit Runge-Kutta step (Kvaerno) takes a fresh
+      Jacobian at each implicit stage instead of one per step -- for models whose
+      stiff directions turn with the state within a step (stiff springs between
+      moving nodes); one per step serves where the stiff part is nearly linear in
+      the state (natural variables).
+    - `step_jacobians`: a multistep method (BDF) takes a fresh Jacobian every step
+      instead of keeping one across steps, for the same reason.
+    - `jacobian`: the model's `vf_jacobian` gives the exact Jacobian (cheaper than
+      coloured JVPs).
+    """
+
+    bandwidth: int | None = eqx.field(static=True, default=None)
+    second_order: int = eqx.field(static=True, default=0)
+    stage_jacobians: bool = eqx.field(static=True, default=False)
+    step_jacobians: bool = eqx.field(static=True, default=False)
+    jacobian: bool = eqx.field(static=True, default=False)
+
+
 class AbstractModel(eqx.Module):
     """A model: state layout, internal physics, and observables.
 
@@ -23,9 +52,14 @@ class AbstractModel(eqx.Module):
     - `project(y)`: the nearest state on the model's constraint manifold (identity
       for unconstrained models); `simulate` applies it after every step when
       `projects` is True.
+
+    Optional: `structure(effects)`, what the implicit solvers may assume (a
+    `SolverStructure`), and `vf_jacobian`, an analytic Jacobian; `preset_system`,
+    the row of the accuracy presets (`jaxstring.preset`) the model uses.
     """
 
     accepts: ClassVar[tuple[type, ...]] = ()
+    preset_system: ClassVar[str] = "other"
 
     @abc.abstractmethod
     def state_shape(self) -> tuple[int, ...]:
@@ -48,59 +82,17 @@ class AbstractModel(eqx.Module):
     def project(self, y) -> Array:
         """The nearest state on the constraint manifold."""
 
-    def node_bandwidth(self, effects) -> int | None:
-        """The node bandwidth of the Jacobian of `vector_field` under `effects`, if
-        the model knows it (node-major state `(n, b)` where node i couples to nodes
-        i - w ... i + w), else None. Implicit solvers then skip detecting the band
-        by probing (`jaxstring._linalg.detect_width`), which costs an extra XLA
-        compilation at trace time. Default: None (detect)."""
+    def structure(self, effects) -> SolverStructure:
+        """What the implicit solvers may assume of `vector_field` under `effects`
+        (band, second-order layout, where Jacobians are taken, an analytic
+        Jacobian): a `SolverStructure`. Default: nothing (detected or generic)."""
         del effects
-        return None
-
-    def second_order(self, effects) -> int:
-        """d > 0 if every node row of the state is (q, v), d components each, and
-        `vector_field` returns exactly v as dq/dt under `effects`. The implicit
-        solvers then reduce each banded Newton system to the velocities
-        (`jaxstring._linalg.SecondOrderFactor`: blocks of d instead of 2 d).
-        Default: 0 (no such layout)."""
-        del effects
-        return 0
-
-    def stage_jacobians(self, effects) -> bool:
-        """Whether an implicit Runge-Kutta step (Kvaerno) should take a fresh
-        Jacobian at each implicit stage's predictor rather than one per step.
-
-        True where the stiff forces turn with the state, so that a Jacobian from
-        the step's first stage no longer contracts the later stages' Newton
-        iterations (stiff springs between moving nodes: the displacement string,
-        the lumped-mass tether). False (the default) where the stiff part is
-        (nearly) linear in the state, as in natural variables, where the extra
-        factorisations would only cost time."""
-        del effects
-        return False
-
-    def step_jacobians(self, effects) -> bool:
-        """Whether a multistep method (BDF) should take a fresh Jacobian at every
-        step rather than keep one across steps.
-
-        True where the stiff directions turn so fast with the state that a
-        Jacobian from the previous step does not contract the Newton iteration
-        (the displacement string swinging: 0.07 % of its steps converged with the
-        stored one); BDF then carries no factorisation at all. False (the default)
-        where a stored Jacobian serves many steps: natural variables, and mooring
-        chains moving slowly (MoorDyn's chain cases: BDF 1.3-1.8x faster keeping
-        it)."""
-        del effects
-        return False
+        return SolverStructure()
 
     def vf_jacobian(self, t, y, effects, env):
-        """The Jacobian of `vector_field` at `(t, y)` as a
-        `jaxstring._linalg.BlockTridiagonal` (one node per block), if the model can
-        build it more cheaply than the implicit solvers' coloured JVPs (3 b of them
-        for b components a node), else None. Default: None.
-
-        A model that returns a matrix must return the exact Jacobian under
-        `effects` (tests/test_fast_solvers.py compares it with the JVP-built one)
-        and None for any effect it does not know."""
+        """The exact Jacobian of `vector_field` at `(t, y)` under `effects`, as a
+        `jaxstring._linalg` block-tridiagonal matrix, for a model whose
+        `structure(effects).jacobian` is True; else None (the solvers build it
+        from coloured JVPs)."""
         del t, y, effects, env
         return None

@@ -127,6 +127,12 @@ class Scene(eqx.Module):
     def energy(self, y):
         return self.observables(y)["energy"]
 
+    @property
+    def structure(self):
+        """What the implicit solvers may assume of the scene's vector field (the
+        model's `SolverStructure` under the scene's effects)."""
+        return self.model.structure(self.effects)
+
     def has(self, kind: type) -> bool:
         """Whether the scene calls for an effect of this type."""
         return any(isinstance(e, kind) for e in self.effects)

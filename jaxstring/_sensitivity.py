@@ -30,13 +30,9 @@ import jax.lax as lax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
+from ._integrate import integrate, solver_parts
 from ._scene import Scene, scene_vector_field
-
-
-class SensitivityAdjoint(dfx.ForwardMode):
-    """Marker adjoint for `fit`, `value_and_grad`: gradients from forward
-    sensitivities integrated with the state under the same error control (see
-    `jaxstring._sensitivity`). A plain solve under it is a forward-mode solve."""
+from ._trajectory import Trajectory
 
 
 def _as_nodes(y):
@@ -91,18 +87,17 @@ def sensitivity_solve(
     S0 = jax.vmap(dy0)(directions)
     field = _AugmentedField(scene_of, directions, tuple(y0.shape), int(len(directions)))
     z0 = jnp.concatenate([_as_nodes(y0)] + [_as_nodes(s) for s in S0], axis=-1)
-    sol = dfx.diffeqsolve(
-        dfx.ODETerm(field),
-        solver,
-        t0=scene.t0,
-        t1=scene.t1,
+    sol = integrate(
+        field,
+        z0,
+        x,
+        scene.t0,
+        scene.t1,
+        solver=solver,
+        controller=controller,
         dt0=dt0,
-        y0=z0,
-        args=x,
         saveat=dfx.SaveAt(ts=ts),
-        stepsize_controller=controller,
         max_steps=max_steps,
-        throw=False,
     )
     ys, S = jax.vmap(field.split)(sol.ys)
     return ys, jnp.moveaxis(S, 1, 0), sol
@@ -114,16 +109,13 @@ def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
     axis, from one solve of the state and its sensitivities.
 
     `config` is the solve's `SolveConfig`, `ts` the save times of `traj` (None:
-    `config.n_save` over the span). Each
+    the configuration's). Each
     direction is its parameter's own magnitude (1 where `is_log`: log-parameters,
     and for a zero value), so that the sensitivities have the state's scale and its
     error control fits them."""
-    from ._simulate import solver_parts
-    from ._trajectory import Trajectory
-
     scene = scene_of(x)
     if ts is None:
-        ts = jnp.linspace(scene.t0, scene.t1, config.n_save)
+        ts = config.save_times(scene.t0, scene.t1)
     solver, controller, dt0 = solver_parts(scene, config)
     scale = lax.stop_gradient(jnp.where(is_log | (x == 0), 1.0, jnp.abs(x)))
     directions = jnp.diag(scale)

@@ -89,9 +89,10 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ._fit import _follow, parameter_names, resolve
+from ._integrate import integrate, solve
 from ._jit import cpu_jit
 from ._scene import Scene
-from ._simulate import SolveConfig, _save_times, solve
+from ._solve_config import SolveConfig, solve_config
 from ._solvers.diffrax_compat import code_message, result_code
 from ._solvers.fixed_step import ThetaMethod
 from ._solvers.projected import ProjectedSolver
@@ -258,25 +259,18 @@ LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
 
 def _lockstep_solver(config, scene):
     name = config.solver
+    nr, na = config.newton_tolerances()
     if name in LOCKSTEP_FIXED:
-        nr = config.rtol if config.newton_rtol is None else config.newton_rtol
-        na = config.atol if config.newton_atol is None else config.newton_atol
-        return ThetaMethod(
-            theta=LOCKSTEP_FIXED[name],
-            rtol=jnp.asarray(nr, dtype=jnp.float64),
-            atol=jnp.asarray(na, dtype=jnp.float64),
-        )
+        return ThetaMethod(theta=LOCKSTEP_FIXED[name], rtol=nr, atol=na)
     if name in KVAERNO:
         cls = kvaerno_class(name, scene)
     else:
         cls = LOCKSTEP_SOLVERS[name]
     if cls in (dfx.Tsit5, dfx.Dopri5):
         return cls()
-    nr = config.rtol if config.newton_rtol is None else config.newton_rtol
-    na = config.atol if config.newton_atol is None else config.newton_atol
     chord = StageNewton(
-        rtol=jnp.asarray(nr, dtype=jnp.float64),
-        atol=jnp.asarray(na, dtype=jnp.float64),
+        rtol=nr,
+        atol=na,
         norm=member_rms_max,
         max_iters=_MAX_ITERS_ADAPTIVE,
         linear_solver="batched",
@@ -316,15 +310,11 @@ def _lockstep(vals, scene, getters, fn, config, ts):
     n = vals[0].shape[0]
     y0 = jnp.broadcast_to(scene.y0, (n,) + jnp.shape(scene.y0))
     solver = _lockstep_solver(config, scene)
-    fixed = False
-    dt0 = config.dt0
     args = batch
     flat = config.solver in LOCKSTEP_FIXED
     if flat:
         # Node-major member states concatenated along the node axis (see
-        # `_FlatBatch`); default step as in `simulate`.
-        fixed = True
-        dt0 = 0.005 if dt0 is None else dt0
+        # `_FlatBatch`).
         args = _FlatBatch(batch, tuple(y0.shape))
         y0 = y0.reshape((-1,) + y0.shape[2:])
     if config.project and scene.model.projects:
@@ -332,27 +322,26 @@ def _lockstep(vals, scene, getters, fn, config, ts):
         saveat = dfx.SaveAt(ts=ts, fn=lambda t, y, args: args.project(y))
     else:
         saveat = dfx.SaveAt(ts=ts)
-    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)
-    sol = dfx.diffeqsolve(
-        dfx.ODETerm(_batch_vector_field),
-        solver,
-        t0=scene.t0,
-        t1=scene.t1,
-        dt0=None if dt0 is None else f64(dt0),
-        y0=y0,
-        args=args,
-        saveat=saveat,
+    sol = integrate(
+        _batch_vector_field,
+        y0,
+        args,
+        scene.t0,
+        scene.t1,
+        solver=solver,
         # the controller `simulate` uses for this solver (NewtonLimitedController
         # for the Kvaerno family), on the member-wise max norm
-        stepsize_controller=make_controller(
+        controller=make_controller(
             config.solver,
-            f64(config.rtol),
-            f64(config.atol),
-            not fixed,
+            config.rtol,
+            config.atol,
+            config.adaptive,
+            config.step_control,
             norm=member_rms_max,
         ),
+        dt0=config.initial_step(),
+        saveat=saveat,
         max_steps=config.max_steps,
-        throw=False,
     )
     stats = {
         key: jnp.broadcast_to(sol.stats[key], (n,))
@@ -553,21 +542,13 @@ def sweep(
     fn: Callable | None = None,
     *,
     grid: bool = False,
-    solver="kvaerno5",
-    rtol: float = 1e-6,
-    atol: float = 1e-6,
-    ts=None,
-    n_save: int = 201,
-    dt0=None,
-    newton_rtol: float | None = None,
-    newton_atol: float | None = None,
-    max_steps: int = 200_000,
-    project: bool = True,
     devices="auto",
     batch_size: int | None = None,
     order: str = "given",
     mode: str = "vmap",
     fallback: bool = True,
+    config: SolveConfig | None = None,
+    **options,
 ) -> SweepResult:
     """Simulate `scene` for a batch or grid of parameter values in one compiled call.
 
@@ -587,8 +568,10 @@ def sweep(
     - `fn`: `fn(traj, scene) -> pytree of arrays` evaluated on each member's
       `Trajectory` inside the compiled call (e.g. a period, the maximum tension);
       default: all observables `traj.obs`.
-    - `solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `newton_rtol`, `newton_atol`,
-      `max_steps`, `project`: as for `jaxstring.simulate`; `ts` is shared by all
+    - `config`: the `SolveConfig` of every member's solve (default:
+      `SolveConfig.default("sweep")`); `options`: its fields as shortcuts
+      (`solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `newton_rtol`,
+      `newton_atol`, `max_steps`, `project`, `step_control`); `ts` is shared by all
       members (default: `n_save` points over the base scene's span).
     - `devices`: `"auto"` (all devices of the default backend), a list of devices, or
       1 / None (no sharding). Members are padded to a multiple of the device count.
@@ -643,6 +626,9 @@ def sweep(
         )
     check_choice("order", order, ("given", "sort"))
     check_choice("mode", mode, ("vmap", "lockstep"))
+    config = solve_config("sweep", config, **options)
+    config.check_scene(scene)
+    solver = config.solver
     if batch_size is not None:
         check_int("batch_size", batch_size, 1)
     _check_devices(devices)
@@ -723,18 +709,8 @@ def sweep(
     else:
         arrays = [a.ravel() for a in arrays]
     n = arrays[0].size
-    config = SolveConfig(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        n_save=n_save,
-        dt0=dt0,
-        newton_rtol=newton_rtol,
-        newton_atol=newton_atol,
-        max_steps=max_steps,
-        project=project,
-    )
-    ts = _save_times(scene, ts, n_save)
+    ts = config.save_times(scene.t0, scene.t1)
+    config = config.replace(ts=None)
     fn = _default_fn if fn is None else fn
 
     perm = np.lexsort(arrays[::-1]) if order == "sort" else np.arange(n)

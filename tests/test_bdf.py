@@ -293,7 +293,7 @@ def test_moordyn_pendulum_stability_guard():
 def _final_refresh_count(formulation, skip_after, reuse=True):
     """BDF on the k = 8 pendulum through diffrax, returning the end state and the
     solver's count of accepted steps in a row that needed a fresh Jacobian."""
-    from jaxstring._simulate import scene_vector_field
+    from jaxstring._scene import scene_vector_field
     from jaxstring._solvers import bdf as _bdf
 
     scene = js.scenes.string_pendulum(formulation, k=8, EA=1e6, t1=0.3)

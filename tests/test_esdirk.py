@@ -11,7 +11,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit
-from jaxstring._simulate import scene_vector_field
+from jaxstring._scene import scene_vector_field
 from jaxstring._solvers.esdirk import ESDIRK
 from jaxstring._solvers.registry import build_solver
 from jaxstring._solvers.stage_newton import StageNewton

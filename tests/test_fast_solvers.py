@@ -377,7 +377,7 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
     # The string models declare their Jacobian's node bandwidth, so that implicit
     # solvers skip the trace-time probe (1.5-2 s of compilation per relation):
     # the declaration must be what probing finds, with every string effect on.
-    from jaxstring._simulate import scene_vector_field
+    from jaxstring._scene import scene_vector_field
 
     scene = js.scenes.string_pendulum(
         formulation=formulation,
@@ -411,7 +411,7 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
     rng = np.random.default_rng(dim)
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     fn = lambda u: scene.vector_field(0.0, u)
-    assert scene.model.second_order(scene.effects) == dim
+    assert scene.structure.second_order == dim
     fac = _linalg.factor(_linalg.jacobian(fn, y, 1, second_order=dim).scale_shift(a, b))
     assert isinstance(fac, _linalg.SecondOrderFactor)
     assert fac.sfac.dinv_last.shape == (dim, dim)  # d x d blocks, not 2d x 2d
@@ -452,7 +452,7 @@ def test_declared_second_order_matches_the_jacobian():
     assert np.array_equal(J[:, :2], expect)
     # The natural variables declare nothing.
     nat = js.scenes.string_pendulum("angle", k=7)
-    assert nat.model.second_order(nat.effects) == 0
+    assert nat.structure.second_order == 0
 
 
 def test_second_order_factor_refuses_a_wrong_structure():

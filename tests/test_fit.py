@@ -8,6 +8,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _fit
+from jaxstring._solve_config import make_adjoint
 
 from .helpers import FORMULATIONS, assert_grad_matches_central_differences
 
@@ -122,7 +123,7 @@ def test_fit_freezes_other_leaves_and_rejects_bad_input():
             steps=1,
         )
     with pytest.raises(ValueError, match="unknown adjoint"):
-        _fit.make_adjoint("adjoint")
+        make_adjoint("adjoint")
 
 
 @pytest.mark.parametrize("positive", [False, True])

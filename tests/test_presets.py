@@ -1,6 +1,6 @@
 """Accuracy presets reach the end-mass error they were chosen for, per system.
 
-The presets (jaxstring/_solvers/presets.py) were measured at k = 40 over 2 s
+The presets (jaxstring/_presets.py) were measured at k = 40 over 2 s
 (experiments/race_strongest.py --presets); here each is checked against an
 independent tight reference: a small string in displacement and (eps, phi) variables
 against Kvaerno5 at 1e-11 (a different solver from the presets'), and, slow-marked,
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring._solvers.presets import PRESET_TARGETS, preset_system
+from jaxstring._presets import PRESET_TARGETS, preset_system
 
 
 def _error(traj, ref_end):

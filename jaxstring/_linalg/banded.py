@@ -23,7 +23,7 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   mechanical chains, whose reduced matrices are (scaled) symmetric positive
   definite; ``tests/test_fast_solvers.py`` checks it against the dense solve.
 * ``SecondOrderFactor``: for a model whose node rows are (q, v) with dq/dt = v
-  exactly (declared by ``AbstractModel.second_order``), the Newton matrix
+  exactly (declared by ``SolverStructure.second_order``), the Newton matrix
   ``[[a I, b I], [P, Q]]`` is reduced to the velocity unknowns,
   ``S = Q - (b / a) P``: blocks of half the size, 8x fewer block flops and a
   closed-form 2 x 2 inverse in 2D.
@@ -160,13 +160,13 @@ def detect_width(fn, y, args=None, max_width: int = 4):
 
 
 def declared_width(fn, y, args=None):
-    """The node bandwidth the scene's model declares (`AbstractModel.node_bandwidth`)
+    """The node bandwidth the scene's model declares (`SolverStructure.bandwidth`)
     when exactly one scene is found in `fn` and `args` (the ODE's arguments inside a
     solver's stage relation) and the unknown `y` has the scene's state shape, else
     None. The stage relations of implicit methods (y - c f(y) and the like) have the
     band of the vector field."""
     scene = _declared_scene(fn, y, args)
-    return None if scene is None else scene.model.node_bandwidth(scene.effects)
+    return None if scene is None else scene.structure.bandwidth
 
 
 def _declared_scene(fn, y, args):
@@ -636,15 +636,16 @@ def _second_order_jacobian_factor(mat: SecondOrderJacobian) -> "SecondOrderFacto
 
 def declared_second_order(fn, y, args=None) -> int:
     """d > 0 when the scene's model (found as in `declared_width`) declares the
-    (q, v) node layout with dq/dt = v (`AbstractModel.second_order`) and `y` has
+    (q, v) node layout with dq/dt = v (`SolverStructure.second_order`) and `y` has
     the scene's state shape; else 0."""
     scene = _declared_scene(fn, y, args)
-    return 0 if scene is None else int(scene.model.second_order(scene.effects))
+    return 0 if scene is None else int(scene.structure.second_order)
 
 
 def model_jacobian(terms, t, y, args):
-    """The model's own Jacobian (`AbstractModel.vf_jacobian`) when the ODE is a
-    scene's vector field (as `simulate` builds it), else None."""
+    """The model's own Jacobian (`AbstractModel.vf_jacobian`, where its
+    `SolverStructure.jacobian` says it has one) when the ODE is a scene's vector
+    field (as `simulate` builds it), else None."""
     # diffrax's internal WrapTerm (for the direction of time): vf(t) = term.vf(d t)
     while hasattr(terms, "term") and hasattr(terms, "direction"):
         t, terms = t * terms.direction, terms.term
@@ -653,6 +654,7 @@ def model_jacobian(terms, t, y, args):
         and terms.vector_field is scene_vector_field
         and isinstance(args, Scene)
         and tuple(y.shape) == tuple(args.y0.shape)
+        and args.structure.jacobian
     ):
         return None
     return args.model.vf_jacobian(t, y, args.effects, args.env)

@@ -1,10 +1,9 @@
-"""Time integrators: the registry of named solvers, accuracy presets, and the project's
+"""Time integrators: the registry of named solvers and the project's
 own stiff solvers (BDF, Rodas5P, the papers' fixed-step methods, the banded stage
 Newton of the Kvaerno methods), written as diffrax solvers."""
 
 from .bdf import BDF as BDF
 from .fixed_step import Newmark as Newmark, ThetaMethod as ThetaMethod
-from .presets import ACCURACY_PRESETS as ACCURACY_PRESETS
 from .registry import (
     SOLVERS as SOLVERS,
     Kvaerno3 as Kvaerno3,

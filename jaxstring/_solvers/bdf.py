@@ -56,7 +56,7 @@ How it fits into diffrax (static shapes, fixed-size solver state):
   refresh, the step takes a fresh Jacobian at once, and tries the stored one again
   every `_RETRY_STORED` steps (a success resets the count). Natural variables,
   whose stored Jacobian converges, never reach the count. A model that declares
-  that its stiff directions turn with the state (`AbstractModel.step_jacobians`,
+  that its stiff directions turn with the state (`SolverStructure.step_jacobians`,
   the displacement string) gets `reuse_jacobian=False` from `build_solver`: a
   fresh Jacobian at every step, no attempt with a stored one, and no
   factorisation in the solver state, whose copies through the while loop and the
@@ -253,7 +253,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
       carries none in the solver state: for models whose stiff directions turn
       with the state, where a stored Jacobian does not contract the Newton
       iteration (the displacement string; `build_solver` sets it from
-      `AbstractModel.step_jacobians`).
+      `SolverStructure.step_jacobians`).
 
     For ODE terms only (`diffrax.ODETerm`); the state is one array. Use it with
     `diffrax.PIDController(rtol=rtol, atol=atol)` (the solver picks h and the order

@@ -34,7 +34,7 @@ that fails too the step is rejected (infinite error estimate) and the controller
 
 This solver takes one Jacobian per step: the right choice where the stiff force is
 linear in the state (natural variables, the tether, the tandem). Models whose stiff
-directions turn within a step (`AbstractModel.stage_jacobians`: the displacement
+directions turn within a step (`SolverStructure.stage_jacobians`: the displacement
 string) run diffrax's Kvaerno with a Jacobian at every stage and `StageNewton`'s
 refreshes (`registry.kvaerno_class`). Written out here with a Jacobian per stage it was
 slower (k = 40, EA = 1e9, rtol 1e-6: 1.3 s and 12.7k steps against 0.65 s and

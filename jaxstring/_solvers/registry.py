@@ -71,7 +71,7 @@ _MAX_ITERS_ADAPTIVE = 10
 # had been held down by Newton failures. In natural variables, whose stiff force is
 # linear in the state, the step's Jacobian serves every stage and the extra ones
 # only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
-# the model chooses (`AbstractModel.stage_jacobians`). Where one Jacobian per
+# the model chooses (`SolverStructure.stage_jacobians`). Where one Jacobian per
 # step serves, `build_solver` gives the written-out ESDIRK of `esdirk.py` (same
 # tableaux, about half the time per step); the classes below remain for a
 # Jacobian per stage and for `sweep`'s lockstep mode, whose stage solves factorise
@@ -124,8 +124,8 @@ KVAERNO_STEP_JACOBIAN = {
 
 def kvaerno_class(name: str, scene):
     """The Kvaerno solver class for a name: a Jacobian per stage or per step, as
-    the scene's model asks (`AbstractModel.stage_jacobians`)."""
-    per_stage = scene.model.stage_jacobians(scene.effects)
+    the scene's model asks (`SolverStructure.stage_jacobians`)."""
+    per_stage = scene.structure.stage_jacobians
     return (KVAERNO if per_stage else KVAERNO_STEP_JACOBIAN)[name]
 
 
@@ -150,7 +150,7 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
         rtol=newton_rtol, atol=newton_atol, max_iters=_MAX_ITERS_ADAPTIVE
     )
     if solver in KVAERNO:
-        if not scene.model.stage_jacobians(scene.effects):
+        if not scene.structure.stage_jacobians:
             return ESDIRK(method=solver, rtol=newton_rtol, atol=newton_atol)
         return KVAERNO[solver](
             root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
@@ -173,7 +173,7 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
         return dfx.Dopri5()
     if solver == "bdf":
         # A stored Jacobian serves later steps unless the model says its stiff
-        # directions turn too fast with the state (`AbstractModel.step_jacobians`).
-        reuse = not scene.model.step_jacobians(scene.effects)
+        # directions turn too fast with the state (`SolverStructure.step_jacobians`).
+        reuse = not scene.structure.step_jacobians
         return BDF(rtol=newton_rtol, atol=newton_atol, reuse_jacobian=reuse)
     raise AssertionError(solver)

@@ -138,7 +138,7 @@ def _stage_model_jacobian(u, args):
     diagonal, vf, prod, ti, yi, inner, control = (
         a.diagonal, a.vf, a.prod, a.ti, a.yi_partial, a.args, a.control
     )  # fmt: skip
-    if not isinstance(inner, Scene):
+    if not (isinstance(inner, Scene) and inner.structure.jacobian):
         return None
     if not (jnp.shape(control) == () and jnp.shape(yi) == jnp.shape(u)):
         return None

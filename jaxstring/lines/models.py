@@ -23,7 +23,7 @@ contact) are effects (`jaxstring.lines.effects`).
 
 State: node-major `(n, 6)`, row = (position, velocity) of one free body: the interior
 nodes of each line in order and each free point next to the first line that reaches
-it, so that the Jacobian is block-banded with the bandwidth `node_bandwidth` returns
+it, so that the Jacobian is block-banded with the bandwidth its `structure` declares
 (1 for a chain of lines and points), and the implicit solvers' Newton steps cost
 O(nodes).
 """
@@ -38,7 +38,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._geometry import safe_norm
-from .._model import AbstractModel
+from .._model import AbstractModel, SolverStructure
 from .._validate import (
     check_finite,
     check_int,
@@ -312,20 +312,17 @@ class LineNetwork(AbstractModel):
     def project(self, y):
         return y
 
-    def node_bandwidth(self, effects):
+    def structure(self, effects):
+        """The node band of the state's ordering (lines, then free points), the
+        (r, r') layout, and a Jacobian per implicit stage (the stiff axial forces
+        turn with the lines); BDF keeps its Jacobian across steps (mooring chains
+        move slowly)."""
         del effects
         top = self.topology
         lo, hi = top.body[top.seg_lo], top.body[top.seg_lo + 1]
         both = (lo < top.n_state) & (hi < top.n_state)
-        return max(1, int(np.max(np.abs(lo - hi)[both], initial=0)))
-
-    def second_order(self, effects):
-        del effects
-        return 3
-
-    def stage_jacobians(self, effects):
-        del effects
-        return True
+        width = max(1, int(np.max(np.abs(lo - hi)[both], initial=0)))
+        return SolverStructure(bandwidth=width, second_order=3, stage_jacobians=True)
 
     def damping_BA(self):
         """Internal damping BA per line, N s (MoorDyn: -zeta (L/N) sqrt(EA w) for a

@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 
 from .._geometry import direction, safe_norm
 from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
-from .._model import AbstractModel
+from .._model import AbstractModel, SolverStructure
 from .._validate import check_int, check_positive, check_shape
 from .effects import (
     AbstractStringLoad,
@@ -80,14 +80,32 @@ class AbstractString(AbstractModel):
     def state_shape(self):
         return jnp.shape(self.initial_state(0.0))
 
-    def node_bandwidth(self, effects):
-        """1 (each node couples to its neighbours) under jaxstring's own string
-        effects, which act element by element; None (detect) if any other effect
-        is present. tests/test_fast_solvers.py checks it against detection."""
-        local = (Gravity, KelvinVoigt, Slack)
-        if all(type(e) in local for e in effects):
-            return 1
-        return None
+    @property
+    def preset_system(self) -> str:
+        return self.formulation
+
+    @staticmethod
+    def _local(effects) -> bool:
+        """Whether every effect is one of jaxstring's own string effects, which act
+        element by element (each node then couples only to its neighbours)."""
+        return all(type(e) in (Gravity, KelvinVoigt, Slack) for e in effects)
+
+    def structure(self, effects):
+        """Band 1 under jaxstring's own string effects (None: detect, under any
+        other); the displacement string also has the (r, r') layout, its own
+        Jacobian, and stiff directions that turn with the string (a Jacobian per
+        implicit stage and per BDF step). tests/test_fast_solvers.py checks the
+        band against detection and the Jacobian against the JVP-built one."""
+        local = self._local(effects)
+        if self.formulation != "displacement":
+            return SolverStructure(bandwidth=1 if local else None)
+        return SolverStructure(
+            bandwidth=1 if local else None,
+            second_order=self.dim,
+            stage_jacobians=True,
+            step_jacobians=True,
+            jacobian=local,
+        )
 
     def observables(self, t, y, effects, env):
         """Node positions and velocities (pivot included), tension and strain at the
@@ -224,24 +242,6 @@ class DisplacementString(AbstractString):
     def tension_weights(self):
         return jnp.full((self.k,), self.l / self.k)
 
-    def second_order(self, effects):
-        """`dim`: rows are (r_i, r_i') and `vector_field` returns r_i' as dr_i/dt
-        (`AbstractModel.second_order`)."""
-        del effects
-        return self.dim
-
-    def stage_jacobians(self, effects):
-        """True: the stiff axial force N = EA (|D r| - 1) t turns with the string, so
-        a Kvaerno step takes a Jacobian at each stage (`AbstractModel`)."""
-        del effects
-        return True
-
-    def step_jacobians(self, effects):
-        """True: for the same reason a BDF step takes a fresh Jacobian every step
-        (`AbstractModel`)."""
-        del effects
-        return True
-
     def vf_jacobian(self, t, y, effects, env):
         """The exact Jacobian of `vector_field`, element by element
         (`AbstractModel.vf_jacobian`), under jaxstring's string effects (gravity is
@@ -259,7 +259,7 @@ class DisplacementString(AbstractString):
         c_j M_j below (no element beyond the end node; element 0 hangs from the
         fixed pivot)."""
         del t, env
-        if not all(type(e) in (Gravity, KelvinVoigt, Slack) for e in effects):
+        if not self._local(effects):
             return None
         _, laws = split_effects(effects)
         k, dim = self.k, self.dim

@@ -380,6 +380,7 @@ class AbstractTether(AbstractModel):
     method: ClassVar[str]
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (AbstractTetherLoad,)
+    preset_system: ClassVar[str] = "tether"
 
     def __check_init__(self):
         _check_tether(self)

@@ -1,0 +1,184 @@
+"""The one integration behind every solve: `integrate` is jaxstring's only call of
+`diffrax.diffeqsolve`.
+
+`solve(scene, config)` integrates a scene. Other solves hand `integrate` a
+transformed vector field and state: the forward sensitivities of `fit` and
+`least_squares` (`jaxstring._sensitivity`: the state with its derivatives beside it)
+and the members of a lockstep sweep (`jaxstring._sweep`: the members' states
+stacked), with the solver and controller that `solver_parts` builds for the scene.
+"""
+
+import dataclasses
+
+import diffrax as dfx
+import equinox as eqx
+import jax.numpy as jnp
+
+from . import _programs
+from ._jit import cpu_jit
+from ._scene import Scene, scene_vector_field
+from ._solve_config import SolveConfig
+from ._solvers.diffrax_compat import result_code, result_from_code
+from ._solvers.projected import ProjectedSolver
+from ._solvers.registry import build_solver
+from ._solvers.step_size import make_controller
+from ._trajectory import Trajectory
+
+
+def solver_parts(scene: Scene, config: SolveConfig, norm=None):
+    """The diffrax solver (before any projection wrapper), step-size controller and
+    initial step of `scene` under `config`, as every solve builds them. `norm`: the
+    controller's error norm (default: RMS)."""
+    nr, na = config.newton_tolerances()
+    solver = build_solver(config.solver, nr, na, scene)
+    kw = {} if norm is None else {"norm": norm}
+    controller = make_controller(
+        config.solver,
+        config.rtol,
+        config.atol,
+        config.adaptive,
+        config.step_control,
+        **kw,
+    )
+    return solver, controller, config.initial_step()
+
+
+def integrate(
+    vector_field,
+    y0,
+    args,
+    t0,
+    t1,
+    *,
+    solver,
+    controller,
+    dt0,
+    saveat,
+    max_steps,
+    adjoint=None,
+    progress=False,
+):
+    """Integrate dy/dt = `vector_field(t, y, args)` from `y0` over [t0, t1]: the
+    one `diffeqsolve` of the package. Never throws: the solution's `result` says
+    whether it succeeded, with the data up to a failure."""
+    meter = (
+        dfx.TextProgressMeter(minimum_increase=0.05)
+        if progress
+        else dfx.NoProgressMeter()
+    )
+    kw = {} if adjoint is None else {"adjoint": adjoint}
+    return dfx.diffeqsolve(
+        dfx.ODETerm(vector_field),
+        solver,
+        t0=t0,
+        t1=t1,
+        dt0=dt0,
+        y0=y0,
+        args=args,
+        saveat=saveat,
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=False,
+        progress_meter=meter,
+        **kw,
+    )
+
+
+class _ProjectedSolverAD(ProjectedSolver):
+    # diffrax's ForwardMode/DirectAdjoint read `solver.scan_kind` (the wrapped
+    # solver's, set below); ProjectedSolver does not forward it.
+    @property
+    def scan_kind(self):
+        return getattr(self.solver, "scan_kind", None)
+
+
+def _projected(solver, adjoint):
+    """`solver` wrapped to project onto the model's constraint after every step."""
+    if type(adjoint) is dfx.RecursiveCheckpointAdjoint and adjoint.checkpoints is None:
+        return ProjectedSolver(solver)
+    # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
+    # differentiate in forward mode / with DirectAdjoint, but cannot see through
+    # the wrapper: do it before wrapping.
+    kind = (
+        "lax"
+        if isinstance(adjoint, dfx.ForwardMode)
+        else {dfx.DirectAdjoint: "bounded"}.get(type(adjoint))
+    )
+    if kind is not None and isinstance(solver, dfx.AbstractRungeKutta):
+        if solver.scan_kind is None:
+            solver = eqx.tree_at(
+                lambda s: s.scan_kind, solver, kind, is_leaf=lambda x: x is None
+            )
+    return _ProjectedSolverAD(solver)
+
+
+def solve_scene(scene: Scene, config: SolveConfig, saveat, adjoint=None):
+    """diffrax's solution of `scene` under `config`, saved as `saveat(fn)` says,
+    `fn` the projection onto the constraint manifold for a projected solve (None:
+    the state as is). E.g. every step: `saveat=lambda fn: dfx.SaveAt(steps=True)`.
+    `adjoint`: a diffrax adjoint (default: the configuration's for a gradient)."""
+    if adjoint is None:
+        adjoint = config.adjoint_for("gradient")
+    solver, controller, dt0 = solver_parts(scene, config)
+    save_fn = None
+    if config.project and scene.model.projects:
+        solver = _projected(solver, adjoint)
+        save_fn = lambda t, y, args: args.model.project(y)
+    return integrate(
+        scene_vector_field,
+        scene.y0,
+        scene,
+        scene.t0,
+        scene.t1,
+        solver=solver,
+        controller=controller,
+        dt0=dt0,
+        saveat=saveat(save_fn),
+        max_steps=config.max_steps,
+        adjoint=adjoint,
+        progress=config.progress,
+    )
+
+
+def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajectory:
+    """Integrate `scene` under `config` and return its Trajectory.
+
+    Usable inside `jax.grad`, `jax.vmap` and `jit`: no check here looks at array
+    values (the scene may be traced); `config` was checked when it was built. `ts`
+    (default: the configuration's save times) and `adjoint` (a diffrax adjoint;
+    default: the configuration's for a gradient) override the configuration. A
+    failed solve does not raise: the Trajectory's `result` says why, with the data
+    up to the failure.
+    """
+    if ts is None:
+        ts = config.save_times(scene.t0, scene.t1)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    sol = solve_scene(
+        scene,
+        config,
+        lambda fn: dfx.SaveAt(ts=ts) if fn is None else dfx.SaveAt(ts=ts, fn=fn),
+        adjoint,
+    )
+    return Trajectory.from_solution(ts, sol.ys, sol.result, sol.stats, scene)
+
+
+jit_solve = cpu_jit(solve)
+
+
+def _solve_fields(scene, config, ts):
+    """`solve`'s Trajectory as a dict of arrays (a saved program's output)."""
+    traj = solve(scene, config, ts)
+    fields = {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
+    return fields | {"result": result_code(traj.result)}
+
+
+def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:
+    """`solve`, compiled; through a saved program where one can be saved (see
+    `jaxstring._programs`)."""
+    if not config.progress and _programs.usable((scene, config, ts)):
+        fields = _programs.call(_solve_fields, scene, config, ts)
+        if fields is not None:
+            return Trajectory(
+                **(fields | {"result": result_from_code(fields["result"])})
+            )
+    return jit_solve(scene, config, ts)

@@ -1,0 +1,252 @@
+"""`SolveConfig`: every setting of a solve, and the one table of its defaults.
+
+Every function that integrates a scene -- `simulate`, `fit`, `value_and_grad`,
+`gauss_newton`, `least_squares`, `sweep` -- takes a `SolveConfig` as `config=` and
+its fields as keyword shortcuts (`rtol=1e-8` is `config.replace(rtol=1e-8)`). The
+defaults live in `SOLVE_DEFAULTS`, one row per purpose; docs/numerics.md ("Solve
+defaults") gives the measurements each row was chosen from.
+"""
+
+from typing import Any
+
+import diffrax as dfx
+import equinox as eqx
+import jax.numpy as jnp
+
+from ._solvers.registry import check_solver, is_adaptive
+from ._solvers.step_size import STEP_CONTROLS
+from ._validate import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_positive,
+    check_times,
+)
+
+
+PURPOSES = ("simulate", "identify", "sweep")
+"""What a solve is for: one row of `SOLVE_DEFAULTS` each."""
+
+# One row per purpose; a field a row does not name takes the row "simulate"'s value.
+# Identification differentiates many solves of one scene; its tolerance is the
+# simulate row's, which recovered the parameters of the identification studies
+# within their standard deviations at a third of the time of 1e-8 (docs/numerics.md).
+SOLVE_DEFAULTS: dict[str, dict[str, Any]] = {
+    "simulate": {
+        "solver": "kvaerno5",
+        "rtol": 1e-6,
+        "atol": 1e-6,
+        "ts": None,
+        "n_save": 201,
+        "dt0": None,
+        "newton_rtol": None,
+        "newton_atol": None,
+        "max_steps": 200_000,
+        "project": True,
+        "adjoint": "auto",
+        "checkpoints": "auto",
+        "step_control": "auto",
+        "progress": False,
+    },
+    "identify": {},
+    "sweep": {},
+}
+
+ADJOINTS = ("auto", "recursive", "direct", "backsolve", "forward", "sensitivity")
+
+# The step of a fixed-step solver when `dt0` is not given: the paper's, s.
+FIXED_STEP_DT0 = 0.005
+
+
+class SensitivityAdjoint(dfx.ForwardMode):
+    """Marker adjoint: derivatives from forward sensitivities integrated with the
+    state under the same error control (`jaxstring._sensitivity`). A plain solve
+    under it is a forward-mode solve."""
+
+
+def make_adjoint(adjoint, checkpoints=None):
+    """A diffrax adjoint from a name of `ADJOINTS` (`"auto"` and `"recursive"`:
+    diffrax's checkpointed reverse mode; `"sensitivity"`: `SensitivityAdjoint`) or
+    a `diffrax.AbstractAdjoint` instance (returned as is)."""
+    if isinstance(adjoint, dfx.AbstractAdjoint):
+        return adjoint
+    check_choice("adjoint", adjoint, ADJOINTS)
+    if adjoint in ("auto", "recursive"):
+        return dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
+    if adjoint == "direct":
+        return dfx.DirectAdjoint()
+    if adjoint == "backsolve":
+        return dfx.BacksolveAdjoint()
+    if adjoint == "sensitivity":
+        return SensitivityAdjoint()
+    return dfx.ForwardMode()
+
+
+def _f64(x):
+    if x is None or isinstance(x, str):
+        return x
+    try:
+        return jnp.asarray(x, dtype=jnp.float64)
+    except (TypeError, ValueError):
+        return x  # refused by name in __check_init__
+
+
+FIELDS = tuple(SOLVE_DEFAULTS["simulate"])
+
+
+class SolveConfig(eqx.Module):
+    """Every setting of a solve: solver, step-size control, save times, adjoint,
+    limits.
+
+    **Fields** (defaults: the row "simulate" of `jaxstring.SOLVE_DEFAULTS`):
+
+    - `solver`: a name of `jaxstring.SOLVERS` or a `diffrax.AbstractSolver`
+      (default `"kvaerno5"`).
+    - `rtol`, `atol`: error tolerances of the step-size controller (> 0).
+    - `ts`: save times, s, inside the scene's span (None: `n_save` equally spaced
+      points over it).
+    - `n_save`: number of save times when `ts` is None (>= 2).
+    - `dt0`: initial step, s (None: chosen by the controller); the step of a
+      fixed-step solver (None: 0.005 s, the paper's).
+    - `newton_rtol`, `newton_atol`: tolerances of the implicit stages' Newton
+      iteration (None: `rtol`, `atol`).
+    - `max_steps`: limit on the number of steps.
+    - `project`: project a constrained model's state onto its constraint after
+      every step (the Cartesian-tangent string; False shows the drift).
+    - `adjoint`: how derivatives go through the solve: `"auto"` (reverse mode for
+      the gradient of a scalar loss -- `fit`, `value_and_grad`, `jax.grad`; forward
+      mode for the Jacobian of residuals -- `least_squares`, `gauss_newton`),
+      `"recursive"` (diffrax's checkpointed reverse mode), `"direct"`,
+      `"backsolve"` (continuous adjoint), `"forward"`, `"sensitivity"` (forward
+      sensitivities under the solver's error control: accurate through
+      slack-and-snap motions; not for projecting models), or a diffrax adjoint.
+    - `checkpoints`: checkpoints of the reverse mode: `"auto"` (as many as one
+      forward solve takes steps: about one recomputation per step), None
+      (diffrax's log-depth recursion) or an int.
+    - `step_control`: `"auto"`, `"pid"` or `"newton-limited"` (see
+      `jaxstring.NewtonLimitedController`).
+    - `progress`: print a text progress meter.
+
+    Tolerances, `dt0` and `ts` are arrays (traced: a new value reuses the compiled
+    solve); every other field is structure. Build one from a purpose's defaults
+    with `SolveConfig.default("identify")`, change fields with `replace`.
+    """
+
+    solver: Any = eqx.field(static=True, default="kvaerno5")
+    rtol: Any = eqx.field(converter=_f64, default=1e-6)
+    atol: Any = eqx.field(converter=_f64, default=1e-6)
+    ts: Any = eqx.field(converter=_f64, default=None)
+    n_save: int = eqx.field(static=True, default=201)
+    dt0: Any = eqx.field(converter=_f64, default=None)
+    newton_rtol: Any = eqx.field(converter=_f64, default=None)
+    newton_atol: Any = eqx.field(converter=_f64, default=None)
+    max_steps: int = eqx.field(static=True, default=200_000)
+    project: bool = eqx.field(static=True, default=True)
+    adjoint: Any = eqx.field(static=True, default="auto")
+    checkpoints: Any = eqx.field(static=True, default="auto")
+    step_control: str = eqx.field(static=True, default="auto")
+    progress: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        check_solver(self.solver)
+        check_positive("rtol", self.rtol)
+        check_positive("atol", self.atol)
+        check_int("n_save", self.n_save, 2)
+        check_int("max_steps", self.max_steps, 1)
+        check_choice("step_control", self.step_control, STEP_CONTROLS)
+        check_bool("project", self.project)
+        check_bool("progress", self.progress)
+        if self.dt0 is not None:
+            check_positive("dt0", self.dt0, "s")
+        for name in ("newton_rtol", "newton_atol"):
+            if getattr(self, name) is not None:
+                check_positive(name, getattr(self, name))
+        if not isinstance(self.adjoint, dfx.AbstractAdjoint):
+            check_choice("adjoint", self.adjoint, ADJOINTS)
+        if self.checkpoints not in (None, "auto"):
+            check_int("checkpoints", self.checkpoints, 1)
+
+    @classmethod
+    def default(cls, purpose: str = "simulate") -> "SolveConfig":
+        """The defaults of `purpose` (one of `PURPOSES`: "simulate", "identify",
+        "sweep")."""
+        check_choice("purpose", purpose, PURPOSES)
+        return cls(**(SOLVE_DEFAULTS["simulate"] | SOLVE_DEFAULTS[purpose]))
+
+    def replace(self, **fields) -> "SolveConfig":
+        """This configuration with `fields` replaced (names of `FIELDS`; checked)."""
+        unknown = sorted(set(fields) - set(FIELDS))
+        if unknown:
+            raise ValueError(
+                f"unknown solve option(s) {', '.join(map(repr, unknown))}; valid: "
+                f"{', '.join(FIELDS)}."
+            )
+        values = {name: getattr(self, name) for name in FIELDS} | fields
+        return type(self)(**values)
+
+    @property
+    def adaptive(self) -> bool:
+        return is_adaptive(self.solver)
+
+    def newton_tolerances(self):
+        """(rtol, atol) of the stage Newton iteration."""
+        nr = self.rtol if self.newton_rtol is None else self.newton_rtol
+        na = self.atol if self.newton_atol is None else self.newton_atol
+        return nr, na
+
+    def initial_step(self):
+        """`dt0`, or the fixed step of a fixed-step solver, as an array (None for an
+        adaptive solver's own choice)."""
+        if self.dt0 is None and not self.adaptive:
+            return _f64(FIXED_STEP_DT0)
+        return self.dt0
+
+    def save_times(self, t0, t1):
+        """`ts`, or `n_save` equally spaced times over [t0, t1], float64."""
+        if self.ts is not None:
+            return self.ts
+        return jnp.linspace(t0, t1, self.n_save, dtype=jnp.float64)
+
+    def adjoint_for(self, derivative: str = "gradient"):
+        """The diffrax adjoint of a solve whose derivative is a `"gradient"` of a
+        scalar (reverse mode under "auto") or a `"jacobian"` of residuals
+        (forward mode under "auto")."""
+        if self.adjoint == "auto" and derivative == "jacobian":
+            return dfx.ForwardMode()
+        checkpoints = self.checkpoints if isinstance(self.checkpoints, int) else None
+        return make_adjoint(self.adjoint, checkpoints)
+
+    def check_scene(self, scene) -> None:
+        """Refuse settings that do not fit `scene` (save times outside its span; an
+        adjoint that cannot handle a projecting model), naming the field."""
+        if self.ts is not None:
+            check_times("ts", self.ts, scene.t0, scene.t1)
+        projects = self.project and scene.model.projects
+        name = self.adjoint
+        if isinstance(name, dfx.AbstractAdjoint):
+            name = {
+                dfx.BacksolveAdjoint: "backsolve",
+                SensitivityAdjoint: "sensitivity",
+            }.get(type(name), "")
+        if projects and name in ("backsolve", "sensitivity"):
+            raise ValueError(
+                f"`adjoint={name!r}` does not fit a model that projects onto its "
+                f"constraint ({type(scene.model).__name__}); use 'recursive' or "
+                "'forward', or project=False."
+            )
+
+
+def solve_config(
+    purpose: str, config: SolveConfig | None = None, **options
+) -> SolveConfig:
+    """The configuration of a solve for `purpose`: `config` (default: the purpose's
+    defaults) with the keyword shortcuts `options` (fields of `SolveConfig`)
+    replaced. Raises ValueError naming an unknown option or a bad value."""
+    if config is None:
+        config = SolveConfig.default(purpose)
+    elif not isinstance(config, SolveConfig):
+        raise ValueError(
+            f"`config` must be a jaxstring SolveConfig; got {type(config).__name__}: "
+            f"{config!r}."
+        )
+    return config.replace(**options) if options else config
