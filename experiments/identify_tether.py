@@ -102,7 +102,7 @@ def identify(N_fit, ts, data, noise, c_n0, steps=12, print_every=2):
     r = _fit.fit(
         scene0,
         loss,
-        ["c_n"],
+        ["Cd"],
         steps=steps,
         optimizer=optax.lbfgs(),
         adjoint="forward",
@@ -110,7 +110,7 @@ def identify(N_fit, ts, data, noise, c_n0, steps=12, print_every=2):
         **kw,
     )
     t = time.perf_counter()
-    gn = _fit.gauss_newton(r.scene, res, ["c_n"], sigma=noise, **kw)
+    gn = _fit.gauss_newton(r.scene, res, ["Cd"], sigma=noise, **kw)
     gn_s = time.perf_counter() - t
     return r, gn, gn_s
 
@@ -198,7 +198,7 @@ def main(quick=False, c_n=1.0, noise=1.0):
     ax[0, 0].set_xlabel("t (s)")
     ax[0, 0].set_ylabel("running-end force (N)")
     ax[0, 0].legend(fontsize=7)
-    ax[0, 1].plot(r.params["c_n"], "o-")
+    ax[0, 1].plot(r.params["Cd"], "o-")
     ax[0, 1].axhline(c_n, color="k", ls=":")
     ax[0, 1].set_xlabel("L-BFGS step")
     ax[0, 1].set_ylabel("c_n")
@@ -212,21 +212,21 @@ def least_squares_vs_adam(N_fit=40, noise=1.0, adam_steps=600):
     accuracy."""
     t1 = float(scenario(4).t1)
     ts = jnp.linspace(0.0, t1, 81)
-    truth = dict(c_n=1.0, c_t=float(scenario(4).effects[2].c_t))
+    truth = dict(Cd=1.0, CdAx=float(scenario(4).effects[2].CdAx))
     _, data = measurement(2 * N_fit, ts, noise)
     res = EndForceResidual(data=jnp.asarray(data), weight=jnp.asarray(fit_window(ts)))
     start = scenario(N_fit, c_n=0.7)
-    start = eqx.tree_at(lambda s: s.effects[2].c_t, start, 0.7 * start.effects[2].c_t)
+    start = eqx.tree_at(lambda s: s.effects[2].CdAx, start, 0.7 * start.effects[2].CdAx)
     kw = dict(solver="dopri5", rtol=1e-8, atol=1e-8, ts=ts, max_steps=100_000)
     t0 = time.perf_counter()
-    ls = js.least_squares(start, res, ["c_n", "c_t"], sigma=noise, **kw)
+    ls = js.least_squares(start, res, ["Cd", "CdAx"], sigma=noise, **kw)
     ls_wall = time.perf_counter() - t0
-    target = {k: (ls.values[k], ls.std[k]) for k in ("c_n", "c_t")}
+    target = {k: (ls.values[k], ls.std[k]) for k in ("Cd", "CdAx")}
     reached = {}
 
     def callback(step, value, scene):
         drag = scene.effects[2]
-        now = {"c_n": float(drag.c_n), "c_t": float(drag.c_t)}
+        now = {"Cd": float(drag.Cd), "CdAx": float(drag.CdAx)}
         if all(abs(now[k] - v) < sd for k, (v, sd) in target.items()):
             reached["step"] = step + 1
             raise StopIteration
@@ -235,18 +235,18 @@ def least_squares_vs_adam(N_fit=40, noise=1.0, adam_steps=600):
     t0 = time.perf_counter()
     try:
         _fit.fit(
-            start, loss, ["c_n", "c_t"], steps=adam_steps, learning_rate=0.05,
+            start, loss, ["Cd", "CdAx"], steps=adam_steps, learning_rate=0.05,
             print_every=None, callback=callback, **kw,
         )  # fmt: skip
     except StopIteration:
         pass
     n = reached.get("step")
     row = dict(
-        c_n=ls.values["c_n"],
-        c_n_std=ls.std["c_n"],
-        c_t=ls.values["c_t"],
-        c_t_std=ls.std["c_t"],
-        c_n_true=truth["c_n"],
+        c_n=ls.values["Cd"],
+        c_n_std=ls.std["Cd"],
+        c_t=ls.values["CdAx"],
+        c_t_std=ls.std["CdAx"],
+        c_n_true=truth["Cd"],
         c_t_true=truth["c_t"],
         lm_iterations=ls.iterations,
         lm_solves=ls.solves,

@@ -35,7 +35,7 @@ MoorDyn set-up (v2 input file, written by ``moordyn_input``):
   (its log: "Water kinematics for IC gen: No Waves or Currents"), see below;
 - hydrodynamics (``line_properties``, read from the scene): MoorDyn's Cd acts on
   the frontal area d l and CdAx on the surface pi d l, exactly as jaxstring's
-  `Drag` (D_n = d l_e, D_t = pi d l_e), so Cd = Drag.c_n = 1 and CdAx = Drag.c_t.
+  `Drag` (D_n = d l_e, D_t = pi d l_e), so Cd = Drag.Cd = 1 and CdAx = Drag.CdAx.
   ``tether_fixed`` reads the paper's c_t = 0.1 as a coefficient on the projected
   area d l_e (see its docstring) and hands `Drag` c_t/pi = 0.0318, so MoorDyn gets
   CdAx = 0.0318, not 0.1 (with 0.1 MoorDyn's end forces at 10 s are 40 % higher).
@@ -154,7 +154,7 @@ def line_properties(scene):
 
     jaxstring's `Drag` puts the tangential coefficient on the wetted area pi d l_e
     and the normal one on d l_e, exactly as MoorDyn's CdAx and Cd, so CdAx is the
-    scene's `Drag.c_t` as it is (``tether_fixed`` may have converted the paper's
+    scene's `Drag.CdAx` as it is (``tether_fixed`` may have converted the paper's
     c_t to that area first) and Cd its `c_n`. The element inertia is isotropic,
     so Ca = CaAx = `added_mass`."""
     model = scene.model
@@ -162,16 +162,16 @@ def line_properties(scene):
     if len(drag) != 1 or scene.env.current is None:
         raise ValueError("`scene` must have one Drag effect and a current.")
     drag = drag[0]
-    if float(drag.c_l) != 0.0:
-        raise ValueError("`scene`: MoorDyn has no lateral drag; c_l must be 0.")
+    if drag.Cl is not None and float(drag.Cl) != 0.0:
+        raise ValueError("`scene`: MoorDyn has no lateral drag; Cl must be None or 0.")
     return {
         "L": float(model.L),
         "d": float(model.d),
         "w": float(model.mass_per_length),
         "rho": float(scene.env.rho_water),
         "Ca": float(model.added_mass),
-        "Cd": float(drag.c_n),
-        "CdAx": float(drag.c_t),
+        "Cd": float(drag.Cd),
+        "CdAx": float(drag.CdAx),
         "current": tuple(float(u) for u in np.asarray(scene.env.current.velocity)),
         "g": PARAMS["g"],
     }
@@ -359,7 +359,7 @@ def run_moordyn(scene, nodes0, t_out, segments, EA, cfl=CFL, workdir=None):
     }
 
 
-class CentralTangentDrag(js.AbstractTetherLoad):
+class CentralTangentDrag(js.AbstractChainLoad):
     """Diagnostic: the scene's `Drag` with MoorDyn's element tangent.
 
     jaxstring's tether hands its loads the direction of the link *ahead* of each
@@ -549,7 +549,7 @@ def main(quick=False, methods=None, repeats=None, variants=None):
             "shape_*: max distance between the chains (resampled by index "
             "fraction), m. max_abs_length_error: max |L - sum of segment lengths|/L.",
             f"Mapping: Cd = c_n = {props['Cd']:g}; CdAx = {props['CdAx']:.5g} = the "
-            "scene's Drag.c_t, which like MoorDyn's CdAx acts on the wetted area "
+            "scene's Drag.CdAx, which like MoorDyn's CdAx acts on the wetted area "
             "pi d l (tether_fixed puts the paper's c_t = 0.1 on the projected area "
             "d l_e and so passes 0.1/pi); MoorDyn's axial drag measured on a "
             f"straight line in axial flow / 0.5 rho CdAx pi d l = {drag_ratio:.4f}. "

@@ -4,6 +4,7 @@ import importlib.metadata
 
 from . import (
     _config,  # noqa: F401  (x64 and BLAS threads, before anything else)
+    chain as chain,
     lines as lines,
     pendulum as pendulum,
     scenes as scenes,
@@ -58,6 +59,8 @@ from ._trajectory import Trajectory as Trajectory
 
 # Every system's public names, flat as well (each list lives once, in its
 # namespace's `__all__`): js.DisplacementString, js.Drag, js.Tandem, ...
+from .chain import *  # noqa: E402, F403
+from .lines import *  # noqa: E402, F403
 from .pendulum import *  # noqa: E402, F403
 from .tandem import *  # noqa: E402, F403
 from .tether import *  # noqa: E402, F403

@@ -30,6 +30,7 @@ import jax.tree_util as jtu
 import numpy as np
 import optax
 
+from ._blas import single_blas_thread
 from ._integrate import solve
 from ._jit import cpu_jit
 from ._scene import Scene
@@ -361,6 +362,7 @@ def _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     return value, grad
 
 
+@single_blas_thread
 def value_and_grad(
     scene: Scene,
     loss_fn: Callable,
@@ -388,6 +390,7 @@ def value_and_grad(
     return float(value), {g.label: np.asarray(g(grad)) for g in getters}
 
 
+@single_blas_thread
 def fit(
     scene: Scene,
     loss_fn: Callable,
@@ -542,6 +545,7 @@ def fit(
 # Uncertainty of a least-squares fit
 
 
+@single_blas_thread
 def gauss_newton(
     scene: Scene,
     residual_fn: Callable,

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._blas import single_blas_thread
 from ._fit import check_jacobian_adjoint, identify_config, resolve, resolve_params
 from ._integrate import solve
 from ._scene import Scene
@@ -210,6 +211,7 @@ def _check_bounds(bounds, labels, starts):
     return bounds
 
 
+@single_blas_thread
 def least_squares(
     scene: Scene | Sequence[Scene],
     residual_fn: Callable,

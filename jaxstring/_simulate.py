@@ -1,11 +1,13 @@
 """simulate(scene, ...) -> Trajectory."""
 
+from ._blas import single_blas_thread
 from ._integrate import solve_compiled
 from ._presets import preset
 from ._scene import Scene
 from ._solve_config import SolveConfig, solve_config
 
 
+@single_blas_thread
 def simulate(
     scene: Scene,
     solver=None,

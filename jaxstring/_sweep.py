@@ -88,6 +88,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ._blas import single_blas_thread
 from ._fit import _follow, parameter_names, resolve
 from ._integrate import integrate, solve
 from ._jit import cpu_jit
@@ -536,6 +537,7 @@ def _check_devices(devices):
     )
 
 
+@single_blas_thread
 def sweep(
     scene: Scene,
     values: dict,

@@ -124,7 +124,7 @@ CASES = [
         lambda: tt.FixedEnd(jnp.zeros(2)),
         ["`position`", "(2,)", "(3,)"],
     ),
-    ("tether-drag", lambda: tt.Drag(c_n=-1.0), ["`c_n`", "-1.0", ">= 0"]),
+    ("tether-drag", lambda: tt.Drag(Cd=-1.0), ["`Cd`", "-1.0", ">= 0"]),
     ("hull-C_B", lambda: td.fpso_hull(C_B=2.0), ["`C_B`", "2.0", "(0, 1]"]),
     ("hull-L", lambda: td.shuttle_hull(L=0.0), ["`L`", "0.0", "> 0"]),
     ("hawser-k_h", lambda: td.Hawser(k_h=-1.0), ["`k_h`", "-1.0", "> 0"]),

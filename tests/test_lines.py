@@ -118,11 +118,11 @@ def test_bad_point_type(tmp_path):
 def _one_node(velocity, tangent, d=0.25, length=10.0):
     z1 = jnp.zeros(1)
     z0 = jnp.zeros((0, 3))
-    return lines.LineKinematics(
+    return js.chain.ChainKinematics(
         positions=jnp.array([[0.0, 0.0, -10.0]]),
         velocities=jnp.asarray([velocity], jnp.float64),
         tangents=jnp.asarray([tangent], jnp.float64),
-        mass=z1, volume=z1, length=z1 + length, submerged_length=z1 + length,
+        mass=z1, volume=z1, length=z1 + length, wetted_length=z1 + length,
         diameter=z1 + d, Cd=z1 + 1.37, CdAx=z1 + 0.64,
         point_positions=z0, point_velocities=z0, point_mass=jnp.zeros(0),
         point_volume=jnp.zeros(0), point_CdA=jnp.zeros(0),
@@ -185,8 +185,8 @@ def test_static_gradients(wd0050):
 
     def tensions(p):
         m = eqx.tree_at(lambda m: (m.EA, m.w), scene.model, (p[0:1], p[2:3]))
-        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[2], p[1])
-        eff = scene.effects[:2] + (bed,)
+        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[3], p[1])
+        eff = scene.effects[:3] + (bed,)
         y, _ = lines.equilibrium(m, eff, scene.env, scene.t0, y0=scene.y0)
         s = eqx.tree_at(lambda s: (s.model, s.effects, s.y0), scene, (m, eff, y))
         t = lines.moordyn._rest_observables(s)
@@ -288,9 +288,9 @@ def test_wd0050_dynamic_tension_gradient():
 
     def tension(p):
         m = eqx.tree_at(lambda m: (m.Cd, m.EA), scene.model, (p[0:1], p[1:2]))
-        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[2], p[2])
+        bed = eqx.tree_at(lambda e: e.kBot, scene.effects[3], p[2])
         s = eqx.tree_at(
-            lambda s: (s.model, s.effects), scene, (m, scene.effects[:2] + (bed,))
+            lambda s: (s.model, s.effects), scene, (m, scene.effects[:3] + (bed,))
         )
         tr = js.simulate(
             s, "trapezoid", dt0=0.005, ts=ts, rtol=1e-10, atol=1e-10, adjoint="forward"

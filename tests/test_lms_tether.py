@@ -14,10 +14,11 @@ import numpy as np
 import optimistix as optx
 
 import jaxstring as js
+from jaxstring import UniformCurrent
 from jaxstring._environment import Environment
 from jaxstring._scene import Scene
-from jaxstring.tether.effects import Buoyancy, Drag, UniformCurrent, Weight
-from jaxstring.tether.models import (
+from jaxstring.chain import Buoyancy, Drag, Gravity
+from jaxstring.tether import (
     ExactTether,
     FixedEnd,
     LmsTether,
@@ -30,7 +31,7 @@ G = 9.81
 RHO = 1024.0
 D_CABLE = 0.01  # m
 MPL = 0.4  # kg/m: net weight (0.4 - 0.080) g = 3.1 N/m in water
-EFFECTS = (Weight(), Buoyancy(), Drag(c_t=0.1, c_n=1.0))
+EFFECTS = (Gravity(), Buoyancy(), Drag(CdAx=0.1, Cd=1.0))
 
 
 def _ends(span):
@@ -157,7 +158,7 @@ def _swing(c=0.0, k=4e4, t1=2.0):
     model = LmsTether(L=L, d=D_CABLE, mass_per_length=0.5, N=N, k=k, c=c, **_ends(span))
     env = Environment(rho_water=RHO)
     y0 = arc_state(model, bulge=(0.0, 1.0, 0.0))
-    scene = Scene(model=model, effects=(Weight(), Buoyancy()), y0=y0, t1=t1, env=env)
+    scene = Scene(model=model, effects=(Gravity(), Buoyancy()), y0=y0, t1=t1, env=env)
     traj = js.simulate(
         scene, "dopri5", rtol=1e-10, atol=1e-10, ts=jnp.linspace(0.0, t1, 81)
     )

@@ -15,18 +15,15 @@ import pytest
 import scipy.optimize
 
 import jaxstring as js
-from jaxstring._environment import Environment
-from jaxstring._scene import Scene
-from jaxstring.tether.effects import (
-    Buoyancy,
+from jaxstring._environment import (
     DepthProfileCurrent,
-    Drag,
+    Environment,
     FunctionCurrent,
-    TetherKinematics,
     UniformCurrent,
-    Weight,
 )
-from jaxstring.tether.models import (
+from jaxstring._scene import Scene
+from jaxstring.chain import Buoyancy, ChainKinematics, Drag, Gravity
+from jaxstring.tether import (
     AceamTether,
     CoupledEnd,
     EndKinematics,
@@ -34,12 +31,12 @@ from jaxstring.tether.models import (
     FixedEnd,
     PiecewiseLinear,
     PrescribedEnd,
-    _aceam_solve,
     arc_state,
     hanging_state,
-    thomas,
+    tether_fixed,
+    tether_winch,
 )
-from jaxstring.tether.scenes import tether_fixed, tether_winch
+from jaxstring.tether.models import _aceam_solve, thomas
 
 from .helpers import count_eqns
 
@@ -279,7 +276,7 @@ def test_hanging_cable_settles_to_static_shape_in_current(method):
     current, c_t, c_n = (-0.6, 0.0, 0.0), 0.1, 1.0
     cls = ExactTether if method == "exact" else AceamTether
     model = cls(L=L, d=d, mass_per_length=mpl, N=N)
-    effects = (Weight(), Buoyancy(), Drag(c_t=c_t, c_n=c_n))
+    effects = (Gravity(), Buoyancy(), Drag(CdAx=c_t, Cd=c_n))
     env = Environment(rho_water=RHO, current=UniformCurrent(current))
     # Released straight down; the overdamped creep to the steady shape takes a
     # few minutes of simulated time (the time constant is about 30 s).
@@ -319,7 +316,7 @@ def test_energy_conserved_with_exact_tensions_without_drag():
         fast=FixedEnd(jnp.array([8.0, 0.0, 0.0])),
     )
     y0 = arc_state(model, bulge=(0.0, 1.0, 0.0))
-    scene = Scene(model=model, effects=(Weight(), Buoyancy()), y0=y0, t1=3.0, env=ENV)
+    scene = Scene(model=model, effects=(Gravity(), Buoyancy()), y0=y0, t1=3.0, env=ENV)
     traj = js.simulate(
         scene, "dopri5", rtol=1e-10, atol=1e-10, ts=jnp.linspace(0.0, 3.0, 61)
     )
@@ -346,10 +343,17 @@ def _kin(model, seed=0):
     vel = jnp.asarray(rng.normal(size=(N, 3)))
     tan = rng.normal(size=(N, 3))
     tan = jnp.asarray(tan / np.linalg.norm(tan, axis=1, keepdims=True))
-    return TetherKinematics(
-        pos, vel, tan, model.element_mass, model.element_volume,
-        model.element_length, model.d,
-    )  # fmt: skip
+    each = lambda x: jnp.broadcast_to(x, (N,))
+    return ChainKinematics(
+        positions=pos,
+        velocities=vel,
+        tangents=tan,
+        mass=each(model.element_mass),
+        volume=each(model.element_volume),
+        length=each(model.element_length),
+        wetted_length=each(model.element_length),
+        diameter=each(model.d),
+    )
 
 
 def _model(**kw):
@@ -357,10 +361,10 @@ def _model(**kw):
 
 
 def test_drag_matches_hand_formula():
-    drag = Drag(c_t=0.3, c_n=1.2, c_l=0.4)
+    drag = Drag(CdAx=0.3, Cd=1.2, Cl=0.4)
     env = Environment(rho_water=RHO, current=UniformCurrent((0.2, -0.1, 0.3)))
     kin = _kin(_model())
-    F = np.asarray(drag.forces(0.0, kin, env))
+    F = np.asarray(drag.forces(0.0, kin, env).nodes)
     l_e, d = 2.5, 0.02
     for n in range(4):
         i = np.asarray(kin.tangents[n])
@@ -379,15 +383,16 @@ def test_drag_matches_hand_formula():
 def test_zero_relative_velocity_gives_exactly_zero_drag_and_finite_gradient():
     current = UniformCurrent((0.7, -0.2, 0.1))
     env = Environment(rho_water=RHO, current=current)
-    drag = Drag(c_t=0.1, c_n=1.0, c_l=0.5)
+    drag = Drag(CdAx=0.1, Cd=1.0, Cl=0.5)
     kin = _kin(_model())
     with_velocity = lambda v: eqx.tree_at(lambda k: k.velocities, kin, v)
     still = with_velocity(current(0.0, kin.positions))
-    np.testing.assert_array_equal(drag.forces(0.0, still, env), 0.0)
+    np.testing.assert_array_equal(drag.forces(0.0, still, env).nodes, 0.0)
 
     def total(v):
         k = with_velocity(v)
-        return jnp.sum(drag.forces(0.0, k, env) ** 2 + drag.forces(0.0, k, env))
+        f = drag.forces(0.0, k, env).nodes
+        return jnp.sum(f**2 + f)
 
     grad = jax.grad(total)(still.velocities)
     assert np.all(np.isfinite(np.asarray(grad)))
@@ -407,19 +412,21 @@ def test_scene_without_drag_has_no_drag_operations():
     y0 = hanging_state(model, direction=(1.0, 0.0, -1.0))
     with_drag = Scene(
         model=model,
-        effects=(Weight(), Drag()),
+        effects=(Gravity(), Drag(Cd=1.0, CdAx=0.1)),
         y0=y0,
         t1=1.0,
         env=Environment(current=UniformCurrent((-1.0, 0.0, 0.0))),
     )
-    without = Scene(model=model, effects=(Weight(),), y0=y0, t1=1.0)
+    without = Scene(model=model, effects=(Gravity(),), y0=y0, t1=1.0)
     jx = lambda s: jax.make_jaxpr(s.vector_field)(0.0, s.y0).jaxpr
     assert count_eqns(jx(without)) < count_eqns(jx(with_drag))
     # |v_t| (abs) appears only in the drag law.
     assert "abs" in _primitives(jx(with_drag))
     assert "abs" not in _primitives(jx(without))
     # Still water: the current is not traced either.
-    still = Scene(model=model, effects=(Weight(), Drag()), y0=y0, t1=1.0)
+    still = Scene(
+        model=model, effects=(Gravity(), Drag(Cd=1.0, CdAx=0.1)), y0=y0, t1=1.0
+    )
     assert count_eqns(jx(still)) < count_eqns(jx(with_drag))
 
 
@@ -428,13 +435,15 @@ def test_weight_and_buoyancy_cancel_for_neutral_cable():
     kin = _kin(scene.model)
     w, b = scene.effects[0], scene.effects[1]
     np.testing.assert_allclose(
-        w.forces(0.0, kin, scene.env) + b.forces(0.0, kin, scene.env),
+        (w.forces(0.0, kin, scene.env) + b.forces(0.0, kin, scene.env)).nodes,
         0.0,
         atol=1e-14,
     )
     m = scene.model
     np.testing.assert_allclose(
-        w.forces(0.0, kin, scene.env)[0, 2], -float(m.element_mass) * G, rtol=1e-14
+        w.forces(0.0, kin, scene.env).nodes[0, 2],
+        -float(m.element_mass) * G,
+        rtol=1e-14,
     )
 
 
@@ -502,7 +511,7 @@ def test_coupled_end_returns_the_end_forces_of_the_prescribed_end():
     a = AceamTether(fast=path, **kw)
     b = AceamTether(fast=CoupledEnd(), **kw)
     y = arc_state(a) + 0.01
-    effects = (Weight(), Drag())
+    effects = (Gravity(), Drag(Cd=1.0, CdAx=0.1))
     env = Environment(rho_water=RHO, current=UniformCurrent((-1.0, 0.0, 0.0)))
     t = 2.0
     kin = path.kinematics(t)
@@ -549,7 +558,7 @@ def test_end_kinematics_type():
         (lambda: tether_fixed(method="acem"), "method"),
         (lambda: tether_fixed(tangential_area="wet"), "tangential_area"),
         (lambda: DepthProfileCurrent(z=(0.0, -10.0), velocity=((1, 0, 0),) * 2), "`z`"),
-        (lambda: Drag(c_n=-1.0), "`c_n`"),
+        (lambda: Drag(Cd=-1.0), "`Cd`"),
         (lambda: UniformCurrent((1.0, 0.0)), "`velocity`"),
     ],
 )

@@ -3,7 +3,7 @@
 Runs the quick path (11 s of ``tether_fixed``: the 10 s settle phase and 1 s of the
 rise) with MoorDyn 2.7.2 and jaxstring's ExactTether and checks physics, not speed:
 
-- MoorDyn's axial drag acts on pi d l (the mapping CdAx = Drag.c_t relies on it);
+- MoorDyn's axial drag acts on pi d l (the mapping CdAx = Drag.CdAx relies on it);
 - after the settle phase the line hangs in the current, mirror-symmetric about
   z = -25 m, so MoorDyn's two end forces are equal;
 - MoorDyn's line stretches by about |F|/EA (the axial spring that stands in for

@@ -1,23 +1,23 @@
 """Mooring-line networks (MoorDyn's lumped-mass model): lines of lumped masses
-between fixed, prescribed and free points; weight and buoyancy, Morison drag and
-added mass in a current, seabed contact with smooth friction; time-varying
-unstretched lengths; MoorDyn v2 decks in and MoorDyn-style output channels out.
+between fixed, prescribed and free points; weight, buoyancy and Morison drag in a
+current (the chain loads of `jaxstring.chain`), added mass, seabed contact with
+smooth friction; time-varying unstretched lengths; MoorDyn v2 decks in and
+MoorDyn-style output channels out.
 
-Model and points in `models`, loads in `effects`, decks and outputs in `moordyn`.
+Model and points in `models`, seabed contact in `effects`, decks and outputs in
+`moordyn`.
 """
 
-from .effects import (
-    AbstractLineLoad as AbstractLineLoad,
+from ..chain import (
+    Buoyancy as Buoyancy,
     Drag as Drag,
     Gravity as Gravity,
-    LineForces as LineForces,
-    LineKinematics as LineKinematics,
-    Seabed as Seabed,
+    MotionEnd as MotionEnd,
 )
+from .effects import Seabed as Seabed
 from .models import (
     FreePoint as FreePoint,
     LineNetwork as LineNetwork,
-    MotionEnd as MotionEnd,
     equilibrium as equilibrium,
     initial_shape as initial_shape,
 )
@@ -36,15 +36,13 @@ from .moordyn import (
 
 
 __all__ = [
-    "AbstractLineLoad",
+    "Buoyancy",
     "Drag",
     "Gravity",
-    "LineForces",
-    "LineKinematics",
+    "MotionEnd",
     "Seabed",
     "FreePoint",
     "LineNetwork",
-    "MotionEnd",
     "equilibrium",
     "initial_shape",
     "MoorDynDeck",

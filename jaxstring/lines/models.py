@@ -37,52 +37,30 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._arrays import dot as _dot, param as _param
+from .._blas import single_blas_thread
+from .._environment import Environment
 from .._geometry import safe_norm
 from .._model import AbstractModel, SolverStructure
 from .._validate import (
+    check_choice,
     check_finite,
     check_int,
     check_nonnegative,
     check_positive,
     check_shape,
 )
-from ..tether.models import (
+from ..chain import (
+    AbstractChainLoad,
     AbstractEnd,
-    EndKinematics,
+    Buoyancy,
+    ChainKinematics,
+    Gravity,
     PiecewiseLinear,
-    _dot,
-    _f64,
-    _param,
+    links,
+    unit,
 )
-from .effects import AbstractLineLoad, LineKinematics
-
-
-class MotionEnd(AbstractEnd):
-    """A point moved by any JAX function of time: `fn(t, params) -> (3,)`, m.
-
-    Velocity and acceleration are its first two time derivatives (forward-mode
-    autodiff). `fn` is structure; its parameters `params` (a PyTree of arrays) stay
-    differentiable and vmappable.
-    """
-
-    fn: object = eqx.field(static=True)
-    params: object = None
-
-    def __check_init__(self):
-        if not callable(self.fn):
-            raise ValueError(f"`fn` must be callable; got {self.fn!r}.")
-
-    def kinematics(self, t):
-        t = _f64(t)
-
-        def pos(s):
-            return jnp.asarray(self.fn(s, self.params), jnp.float64)
-
-        def vel(s):
-            return jax.jvp(pos, (s,), (jnp.ones_like(s),))
-
-        (p, v), (_, a) = jax.jvp(vel, (t,), (jnp.ones_like(t),))
-        return EndKinematics(p, v, a)
+from .effects import Seabed
 
 
 class FreePoint(eqx.Module):
@@ -102,9 +80,9 @@ class FreePoint(eqx.Module):
     def __check_init__(self):
         check_shape("position", self.position, (3,), "m")
         check_finite("position", self.position)
-        for name, unit in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
-            check_shape(name, getattr(self, name), (), unit)
-            check_nonnegative(name, getattr(self, name), unit)
+        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
+            check_shape(name, getattr(self, name), (), u)
+            check_nonnegative(name, getattr(self, name), u)
         check_nonnegative("Ca", self.Ca)
 
 
@@ -200,7 +178,7 @@ def _solve3(M, f):
 class _State(eqx.Module):
     """Everything one evaluation computes (not user-facing)."""
 
-    kin: LineKinematics
+    kin: ChainKinematics
     seg_tension: Array  # (S,) axial force incl. damping, N
     seg_strain: Array  # (S,)
     seg_l: Array  # unstretched segment lengths (S,)
@@ -249,7 +227,7 @@ class LineNetwork(AbstractModel):
     line_ids: tuple | None = eqx.field(static=True, default=None)
     point_ids: tuple | None = eqx.field(static=True, default=None)
     projects: ClassVar[bool] = False
-    accepts: ClassVar[tuple[type, ...]] = (AbstractLineLoad,)
+    accepts: ClassVar[tuple[type, ...]] = (Gravity, Buoyancy, AbstractChainLoad)
 
     def __check_init__(self):
         if not isinstance(self.points, tuple) or not self.points:
@@ -366,10 +344,10 @@ class LineNetwork(AbstractModel):
     def _state(self, t, y, effects, env) -> _State:
         top = self.topology
         for e in effects:
-            if not isinstance(e, AbstractLineLoad):
+            if not isinstance(e, self.accepts):
                 raise ValueError(
-                    "a LineNetwork takes line effects (Gravity, Drag, Seabed); got "
-                    f"{type(e).__name__} in `effects`."
+                    "a LineNetwork takes chain loads (Gravity, Buoyancy, Drag, "
+                    f"Seabed); got {type(e).__name__} in `effects`."
                 )
         hp, hv, ha = self.held_kinematics(t)
         Bp = jnp.concatenate([y[:, :3], hp], axis=0)
@@ -377,10 +355,7 @@ class LineNetwork(AbstractModel):
         R, V = Bp[top.body], Bv[top.body]
         lo, hi = top.seg_lo, top.seg_lo + 1
         sl = top.seg_line
-        dX = R[hi] - R[lo]
-        lstr = safe_norm(dX)
-        qs = dX / jnp.where(lstr > 0, lstr, 1.0)[:, None]
-        ldstr = _dot(qs, V[hi] - V[lo])
+        qs, lstr, ldstr, _ = links(R[lo], R[hi], V[lo], V[hi])
         Lt, Ldot = self.unstretched_lengths(t)
         Nl = jnp.asarray(self.segments, jnp.float64)
         l = (Lt / Nl)[sl]
@@ -404,20 +379,19 @@ class LineNetwork(AbstractModel):
         area = 0.25 * jnp.pi * self.d**2
         mass = self.w[nl] * length
         volume = area[nl] * sub
-        dq = R[top.next] - R[top.prev]
-        q = dq / jnp.where(safe_norm(dq) > 0, safe_norm(dq), 1.0)[:, None]
+        q = unit(R[top.next] - R[top.prev])
         fm, fv, fcda, fca = self._free_params()
         free_idx = np.asarray(top.free, np.int32)
         fp = Bp[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
         fvel = Bv[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
-        kin = LineKinematics(
+        kin = ChainKinematics(
             positions=R,
             velocities=V,
             tangents=q,
             mass=mass,
             volume=volume,
             length=length,
-            submerged_length=sub,
+            wetted_length=sub,
             diameter=self.d[nl],
             Cd=self.Cd[nl],
             CdAx=self.CdAx[nl],
@@ -490,7 +464,7 @@ class LineNetwork(AbstractModel):
         `tension_a`, `tension_b` (`(n_lines,)`), `point_force` (net force of the
         lines on each point, `(n_points, 3)`), `lengths` (unstretched, m),
         `positions` (the free bodies, `(n, 3)`) and `energy` (kinetic + elastic +
-        the potential of `Gravity` when the scene has it, J)."""
+        the potentials of the scene's constant loads, weight and buoyancy, J)."""
         st = self._state(t, y, effects, env)
         acc = self._accelerations(st)
         fa, fb = self.end_forces(st, acc)
@@ -505,17 +479,16 @@ class LineNetwork(AbstractModel):
         )
         EAs = self.EA[top.seg_line]
         elastic = 0.5 * jnp.sum(EAs * st.seg_l * jnp.maximum(st.seg_strain, 0.0) ** 2)
+        # The potential of the constant loads (weight, buoyancy): minus their work,
+        # over the nodes that move (not those on held points) and the free points.
         pot = jnp.zeros(())
-        from .effects import Gravity
-
-        if any(isinstance(e, Gravity) for e in effects):
-            inner = np.ones(top.body.shape[0], bool)
-            inner[top.body >= top.n_state] = False  # nodes on held points
-            net = kin.mass - env.rho_water * kin.volume
-            pot = env.g * jnp.sum(jnp.where(inner, net * kin.positions[:, 2], 0.0))
-            if len(top.free):
-                pnet = kin.point_mass - env.rho_water * kin.point_volume
-                pot = pot + env.g * jnp.sum(pnet * kin.point_positions[:, 2])
+        inner = np.ones(top.body.shape[0], bool)
+        inner[top.body >= top.n_state] = False
+        for e in effects:
+            if e.constant:
+                f = e.forces(t, kin, env)
+                work = jnp.where(inner, _dot(f.nodes, kin.positions), 0.0)
+                pot = pot - jnp.sum(work) - jnp.sum(_dot(f.points, kin.point_positions))
         return {
             "nodes": kin.positions,
             "node_velocities": kin.velocities,
@@ -608,9 +581,6 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     catenary's largest tension. The starting point of `equilibrium`.
 
     **Returns:** state `(n, 6)`."""
-    from .._environment import Environment
-    from .effects import Gravity, Seabed
-
     env = Environment() if env is None else env
     top = model.topology
     hp = np.asarray(model.held_kinematics(jnp.asarray(t0, jnp.float64))[0])
@@ -626,11 +596,12 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     bed = [e for e in effects if isinstance(e, Seabed)]
     seabed_z = -float(bed[0].depth) if bed else None
     gravity = any(isinstance(e, Gravity) for e in effects)
+    buoyancy = any(isinstance(e, Buoyancy) for e in effects)
     g, rho = float(env.g), float(env.rho_water)
     L = np.asarray(model.unstretched_lengths(jnp.asarray(t0, jnp.float64))[0])
     for k, ((a, b), N) in enumerate(zip(model.attach, model.segments)):
         d = float(model.d[k])
-        w = (float(model.w[k]) - rho * 0.25 * math.pi * d**2) * g if gravity else 0.0
+        w = (float(model.w[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
         EA = float(model.EA[k])
         _, T = _catenary(pts[a], pts[b], float(L[k]), w, N, seabed_z, EA)
         # the stretched line: the catenary of the length under that tension
@@ -733,6 +704,7 @@ def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
     return x, res, it, ftol
 
 
+@single_blas_thread
 def equilibrium(
     model: LineNetwork,
     effects=(),
@@ -762,9 +734,6 @@ def equilibrium(
     `residual` (the norm of the net forces, N) and `iterations`. Raises
     ValueError when the iteration does not converge.
     """
-    from .._environment import Environment
-    from .._validate import check_choice
-
     check_choice("free_points", free_points, ("hold", "solve"))
     env = Environment() if env is None else env
     effects = tuple(effects)

@@ -27,8 +27,8 @@ import numpy as np
 
 from .._environment import Environment
 from .._scene import Scene
-from ..tether.models import FixedEnd, PrescribedEnd
-from .effects import Drag, Gravity, Seabed
+from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
+from .effects import Seabed
 from .models import FreePoint, LineNetwork, equilibrium
 
 
@@ -577,7 +577,7 @@ def deck_scene(
         line_ids=tuple(ln["id"] for ln in deck.lines),
         point_ids=tuple(p["id"] for p in deck.points),
     )
-    effects = [Gravity(), Drag(axial_area=axial_drag)]
+    effects = [Gravity(), Buoyancy(), Drag(axial_area=axial_drag)]
     if o["depth"] > 0:
         effects.append(
             Seabed(

@@ -1,14 +1,15 @@
 """The string pendulum: a viscoelastic string with an end mass (Poth et al.), in
 displacement variables and in natural variables (strain with tangent or angle).
 
-Models in `models`, effects (gravity, Kelvin-Voigt, the slack law) in `effects`,
+Models in `models`, the tension laws (Kelvin-Voigt, the slack law) in `effects`,
 the paper's scene in `scenes`, figures in `plot` (imported on demand: matplotlib).
+Gravity is the chain core's (`jaxstring.chain.Gravity`), re-exported here.
 """
 
+from ..chain import Gravity as Gravity
 from .effects import (
     AbstractStringLoad as AbstractStringLoad,
     AbstractTensionLaw as AbstractTensionLaw,
-    Gravity as Gravity,
     KelvinVoigt as KelvinVoigt,
     Kinematics as Kinematics,
     Loads as Loads,

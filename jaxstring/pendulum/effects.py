@@ -13,8 +13,9 @@ Two kinds of effect act on a string:
   applied on top of the linear elastic part N = EA eps that every string model has.
   They are applied in a fixed order (dissipation first, then the slack clip).
 
-Gravity acts along -y: the paper's pendulum swings in the x-y plane (in 3D, z is
-the out-of-plane direction); its magnitude is the scene's ``Environment.g``.
+Gravity is the chain core's `jaxstring.chain.Gravity`, acting along -y: the
+paper's pendulum swings in the x-y plane (in 3D, z is the out-of-plane direction;
+`Kinematics.up`); its magnitude is the scene's ``Environment.g``.
 """
 
 import abc
@@ -27,6 +28,7 @@ from jaxtyping import Array, Float
 from .._effect import AbstractEffect, AbstractLoad
 from .._geometry import down
 from .._validate import check_nonnegative
+from ..chain import Gravity
 
 
 class Kinematics(eqx.Module):
@@ -45,6 +47,18 @@ class Kinematics(eqx.Module):
     velocities: Float[Array, "n dim"]
     line_mass: Float[Array, ""]
     end_mass: Float[Array, ""]
+
+    @property
+    def up(self):
+        """The upward unit vector, +y (the pendulum swings in the x-y plane)."""
+        return -down(self.positions.shape[-1])
+
+    @property
+    def masses(self) -> "Loads":
+        """Mass per unstrained length at the nodes and the end mass, in the layout
+        of the loads."""
+        n = self.positions.shape[0]
+        return Loads(line=jnp.broadcast_to(self.line_mass, (n, 1)), end=self.end_mass)
 
 
 class Loads(eqx.Module):
@@ -86,19 +100,6 @@ class AbstractTensionLaw(AbstractEffect):
     @abc.abstractmethod
     def elastic_strain(self, eps):
         """Return the strain that stores elastic energy EA/2 eps^2 under this law."""
-
-
-class Gravity(AbstractStringLoad):
-    """Uniform gravity along -y: weight of the string (mu g) and of the end mass,
-    with g the scene's `Environment.g`."""
-
-    constant: ClassVar[bool] = True
-
-    def forces(self, t, kin, env):
-        del t
-        gvec = env.g * down(kin.positions.shape[-1])
-        line = jnp.broadcast_to(kin.line_mass * gvec, kin.positions.shape)
-        return Loads(line=line, end=kin.end_mass * gvec)
 
 
 class KelvinVoigt(AbstractTensionLaw):
@@ -198,7 +199,7 @@ EFFECTS = {
 
 def split_effects(effects):
     """Split effects into (loads, tension laws sorted by their order)."""
-    loads = tuple(e for e in effects if isinstance(e, AbstractStringLoad))
+    loads = tuple(e for e in effects if isinstance(e, AbstractLoad))
     laws = tuple(
         sorted(
             (e for e in effects if isinstance(e, AbstractTensionLaw)),

@@ -26,10 +26,10 @@ from .._geometry import direction, safe_norm
 from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
 from .._model import AbstractModel, SolverStructure
 from .._validate import check_int, check_positive, check_shape
+from ..chain import Gravity
 from .effects import (
     AbstractStringLoad,
     AbstractTensionLaw,
-    Gravity,
     KelvinVoigt,
     Kinematics,
     Slack,
@@ -58,7 +58,11 @@ class AbstractString(AbstractModel):
     k: int = eqx.field(static=True)
     dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str]
-    accepts: ClassVar[tuple[type, ...]] = (AbstractStringLoad, AbstractTensionLaw)
+    accepts: ClassVar[tuple[type, ...]] = (
+        Gravity,
+        AbstractStringLoad,
+        AbstractTensionLaw,
+    )
 
     def __check_init__(self):
         _check_string(self)

@@ -12,7 +12,8 @@ from .._validate import (
     check_nonnegative,
     check_positive,
 )
-from .effects import EFFECTS, Gravity, KelvinVoigt, Slack
+from ..chain import Gravity
+from .effects import EFFECTS, KelvinVoigt, Slack
 from .models import FORMULATIONS
 
 

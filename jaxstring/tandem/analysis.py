@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._blas import single_blas_thread
 from .._scene import Scene
 from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
 
@@ -268,6 +269,7 @@ def _collect(ys, ok, T, clr, J, taut_tension):
     return out
 
 
+@single_blas_thread
 def find_equilibria(
     scene: Scene,
     n_grid=14,

@@ -18,7 +18,7 @@ pass at zero end acceleration, which is accurate to the line/vessel mass ratio
 (~1e-5) -- the spring-linked LMS line needs no second pass.
 
 The scene's effects are split by kind: vessel loads and the actuator act on the
-vessels, tether loads (`Weight`, `Buoyancy`, `Drag`) on the line; a massless
+vessels, chain loads (`Gravity`, `Buoyancy`, `Drag`) on the line; a massless
 `Hawser` in the same scene is refused (the line *is* the hawser). A controller
 computes its command from the vessel states with the massless hawser
 `controller_hawser` as its internal model of the line (the S4 laws need one), so
@@ -34,8 +34,15 @@ import optimistix as optx
 
 from .._model import AbstractModel
 from .._validate import check_finite, check_int, check_positive
-from ..tether.effects import AbstractTetherLoad, Buoyancy, Drag, Weight
-from ..tether.models import AbstractTether, CoupledEnd, EndKinematics, LmsTether
+from ..chain import (
+    AbstractChainLoad,
+    Buoyancy,
+    CoupledEnd,
+    Drag,
+    EndKinematics,
+    Gravity,
+)
+from ..tether import AbstractTether, LmsTether
 from .vessels import (
     HAWSER_K_H,
     HAWSER_L0,
@@ -53,6 +60,9 @@ from .vessels import (
 )
 
 
+LINE_LOADS = (Gravity, Buoyancy, AbstractChainLoad)
+
+
 def split_line_effects(effects):
     """(vessel effects, line effects); raises on a massless `Hawser` or an effect
     that belongs to neither."""
@@ -65,12 +75,12 @@ def split_line_effects(effects):
             )
         if isinstance(e, (AbstractVesselLoad, AbstractActuator)):
             vessel.append(e)
-        elif isinstance(e, AbstractTetherLoad):
+        elif isinstance(e, LINE_LOADS):
             line.append(e)
         else:
             raise ValueError(
-                f"a TandemLine takes vessel loads, one actuator and tether loads "
-                f"(Weight, Buoyancy, Drag); got {type(e).__name__} in `effects`."
+                f"a TandemLine takes vessel loads, one actuator and chain loads "
+                f"(Gravity, Buoyancy, Drag); got {type(e).__name__} in `effects`."
             )
     return tuple(vessel), tuple(line)
 
@@ -109,7 +119,7 @@ class TandemLine(AbstractModel):
     accepts: ClassVar[tuple[type, ...]] = (
         AbstractVesselLoad,
         AbstractActuator,
-        AbstractTetherLoad,
+        *LINE_LOADS,
     )
 
     def __init__(self, tandem, line, controller_hawser=None):
@@ -285,9 +295,10 @@ def hawser_line(
 def line_effects(c_n=1.0, c_t=0.1):
     """Weight, buoyancy and drag on the line (in the scene's current, the one the
     vessels feel)."""
-    # Drag's c_t acts on the wetted surface pi d l_e; c_t / pi puts it on the
-    # projected area d l_e, as the tether scenes do (see jaxstring.tether.scenes).
-    return (Weight(), Buoyancy(), Drag(c_n=c_n, c_t=c_t / jnp.pi))
+    # Drag's axial coefficient acts on the wetted surface pi d l_e; c_t / pi puts
+    # it on the projected area d l_e, as the tether scenes do
+    # (see jaxstring.tether.scenes).
+    return (Gravity(), Buoyancy(), Drag(Cd=c_n, CdAx=c_t / jnp.pi))
 
 
 def _static_residual(p, args):

@@ -1,31 +1,30 @@
 """The inextensible underwater tether (Blintsov): a chain of lumped masses whose
 constraint tensions come from the ACEAM regulator, an exact tridiagonal solve, or
-stiff LMS springs; weight, buoyancy and Morison drag in a current; pay-out and
-haul-in from a winch.
+stiff LMS springs; weight, buoyancy and Morison drag in a current (the chain
+loads of `jaxstring.chain`); pay-out and haul-in from a winch.
 
-Models and ends in `models`, effects in `effects`, the paper's scenes in `scenes`,
-figures in `plot` (imported on demand: matplotlib).
+Models in `models`, the paper's scenes in `scenes`, figures in `plot` (imported on
+demand: matplotlib). Ends, schedules and loads are the chain core's, re-exported
+here.
 """
 
-from .effects import (
-    AbstractTetherLoad as AbstractTetherLoad,
-    Buoyancy as Buoyancy,
-    Drag as Drag,
-    TetherKinematics as TetherKinematics,
-    Weight as Weight,
-)
-from .models import (
+from ..chain import (
     AbstractEnd as AbstractEnd,
-    AbstractTether as AbstractTether,
-    AceamTether as AceamTether,
+    Buoyancy as Buoyancy,
     CoupledEnd as CoupledEnd,
+    Drag as Drag,
     EndKinematics as EndKinematics,
-    ExactTether as ExactTether,
     FixedEnd as FixedEnd,
     FreeEnd as FreeEnd,
-    LmsTether as LmsTether,
+    Gravity as Gravity,
     PiecewiseLinear as PiecewiseLinear,
     PrescribedEnd as PrescribedEnd,
+)
+from .models import (
+    AbstractTether as AbstractTether,
+    AceamTether as AceamTether,
+    ExactTether as ExactTether,
+    LmsTether as LmsTether,
     arc_state as arc_state,
     hanging_state as hanging_state,
 )
@@ -38,22 +37,20 @@ from .scenes import (
 
 
 __all__ = [
-    "AbstractTetherLoad",
-    "Buoyancy",
-    "Drag",
-    "TetherKinematics",
-    "Weight",
     "AbstractEnd",
-    "AbstractTether",
-    "AceamTether",
+    "Buoyancy",
     "CoupledEnd",
+    "Drag",
     "EndKinematics",
-    "ExactTether",
     "FixedEnd",
     "FreeEnd",
-    "LmsTether",
+    "Gravity",
     "PiecewiseLinear",
     "PrescribedEnd",
+    "AbstractTether",
+    "AceamTether",
+    "ExactTether",
+    "LmsTether",
     "arc_state",
     "hanging_state",
     "tether_fixed",

@@ -52,225 +52,34 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._geometry import safe_norm
+from .._arrays import dot as _dot, param as _param
 from .._model import AbstractModel
 from .._validate import (
-    check_finite,
     check_int,
     check_nonnegative,
     check_positive,
     check_shape,
     is_concrete,
 )
-from .effects import AbstractTetherLoad, TetherKinematics
+from ..chain import (
+    AbstractChainLoad,
+    AbstractEnd,
+    Buoyancy,
+    ChainKinematics,
+    CoupledEnd,
+    EndKinematics,
+    FixedEnd,
+    FreeEnd,
+    Gravity,
+    PiecewiseLinear,
+    links,
+)
 
 
 # Inactive (coiled) elements relax to the drum with this time constant, s: slow
 # enough not to stiffen an explicit method, fast enough that an element hauled in is
 # back on the drum long before it is paid out again.
 _DRUM_RELAXATION = 0.05
-
-
-def _f64(x):
-    return jnp.asarray(x, dtype=jnp.float64)
-
-
-def _param(**kw):
-    return eqx.field(converter=_f64, **kw)
-
-
-def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)
-
-
-# ---------------------------------------------------------------------------
-# Schedules and ends
-
-
-class PiecewiseLinear(eqx.Module):
-    """A piecewise-linear function of time, constant before the first and after the
-    last knot, optionally smoothed by a moving average over `smoothing` seconds.
-
-    The smoothed schedule is the exact box-filter average of the piecewise-linear one:
-    equal to it away from the knots, with the velocity ramped linearly over
-    `smoothing` seconds around each knot (finite acceleration). With `smoothing = 0`
-    (the paper's schedules) the velocity jumps at the knots and the acceleration is 0.
-
-    **Arguments:**
-
-    - `times`: knot times, shape `(K,)`, s, strictly increasing.
-    - `values`: values at the knots, shape `(K,)` or `(K, 3)` (m for positions).
-    - `smoothing`: width of the moving average, s (>= 0; structure, not traced).
-    """
-
-    times: Float[Array, " K"] = _param()
-    values: Float[Array, "K ..."] = _param()
-    smoothing: float = eqx.field(static=True, default=0.0)
-
-    def __check_init__(self):
-        if jnp.ndim(self.times) != 1 or jnp.shape(self.times)[0] < 1:
-            raise ValueError(
-                f"`times` must be a 1-d array of knot times, s; got shape "
-                f"{jnp.shape(self.times)}."
-            )
-        if (
-            jnp.ndim(self.values) < 1
-            or jnp.shape(self.values)[0] != jnp.shape(self.times)[0]
-        ):
-            raise ValueError(
-                "`values` must have one row per knot time "
-                f"({jnp.shape(self.times)[0]}); "
-                f"got shape {jnp.shape(self.values)}."
-            )
-        check_finite("times", self.times)
-        check_finite("values", self.values)
-        if is_concrete(self.times) and np.any(np.diff(np.asarray(self.times)) <= 0):
-            raise ValueError(
-                "`times` must be strictly increasing (s); got "
-                f"{np.asarray(self.times)}."
-            )
-        if not (isinstance(self.smoothing, (int, float)) and self.smoothing >= 0):
-            raise ValueError(
-                f"`smoothing` must be a number >= 0 s; got {self.smoothing!r}."
-            )
-
-    def _segment(self, t):
-        """Index i of the segment holding t, the knot value there and the slope."""
-        K = self.times.shape[0]
-        if K == 1:
-            zero = jnp.zeros_like(self.values[0])
-            return 0, self.values[0], zero
-        i = jnp.clip(jnp.searchsorted(self.times, t, side="right") - 1, 0, K - 2)
-        dt = self.times[i + 1] - self.times[i]
-        slope = (self.values[i + 1] - self.values[i]) / dt
-        return i, self.values[i], slope
-
-    def _raw(self, t):
-        """Piecewise-linear value and slope (slope 0 outside the knots)."""
-        i, v0, slope = self._segment(t)
-        tc = jnp.clip(t, self.times[0], self.times[-1])
-        value = v0 + slope * (tc - self.times[i])
-        inside = (t >= self.times[0]) & (t < self.times[-1])
-        return value, jnp.where(inside, slope, jnp.zeros_like(slope))
-
-    def _antiderivative(self, t):
-        """X(t) = int_{times[0]}^t x, with x constant outside the knots."""
-        v = self.values
-        if self.times.shape[0] == 1:
-            return v[0] * (t - self.times[0])
-        seg = 0.5 * (v[1:] + v[:-1]) * _expand(jnp.diff(self.times), v)
-        C = jnp.concatenate([jnp.zeros_like(v[:1]), jnp.cumsum(seg, axis=0)], axis=0)
-        i, v0, slope = self._segment(t)
-        tc = jnp.clip(t, self.times[0], self.times[-1])
-        s = tc - self.times[i]
-        inner = C[i] + v0 * s + 0.5 * slope * s**2
-        before = v[0] * jnp.minimum(t - self.times[0], 0.0)
-        after = v[-1] * jnp.maximum(t - self.times[-1], 0.0)
-        return inner + before + after
-
-    def value(self, t):
-        if self.smoothing == 0:
-            return self._raw(t)[0]
-        h = 0.5 * self.smoothing
-        return (self._antiderivative(t + h) - self._antiderivative(t - h)) / (2 * h)
-
-    def rate(self, t):
-        if self.smoothing == 0:
-            return self._raw(t)[1]
-        h = 0.5 * self.smoothing
-        return (self._raw(t + h)[0] - self._raw(t - h)[0]) / (2 * h)
-
-    def accel(self, t):
-        if self.smoothing == 0:
-            return jnp.zeros_like(self.values[0])
-        h = 0.5 * self.smoothing
-        return (self._raw(t + h)[1] - self._raw(t - h)[1]) / (2 * h)
-
-
-def _expand(x, like):
-    return x.reshape(x.shape + (1,) * (like.ndim - 1))
-
-
-class EndKinematics(eqx.Module):
-    """Position (m), velocity (m/s), acceleration (m/s^2) of a mount point, `(3,)`."""
-
-    position: Float[Array, "3"]
-    velocity: Float[Array, "3"]
-    acceleration: Float[Array, "3"]
-
-
-class AbstractEnd(eqx.Module):
-    """How one end of the tether is held."""
-
-    attached: ClassVar[bool] = True
-
-    @abc.abstractmethod
-    def kinematics(self, t) -> EndKinematics:
-        """Kinematics of the mount point at time `t` (s)."""
-
-
-def _check_point(name, x):
-    if jnp.shape(x) != (3,):
-        raise ValueError(f"`{name}` must have shape (3,) (m); got {jnp.shape(x)}.")
-    check_finite(name, x)
-
-
-class FixedEnd(AbstractEnd):
-    """A mount fixed in space. `position`: shape `(3,)`, m."""
-
-    position: Float[Array, "3"] = _param()
-
-    def __check_init__(self):
-        _check_point("position", self.position)
-
-    def kinematics(self, t):
-        del t
-        z = jnp.zeros(3)
-        return EndKinematics(self.position, z, z)
-
-
-class PrescribedEnd(AbstractEnd):
-    """A mount moving on a prescribed path (paper section 5: piecewise linear).
-
-    **Arguments:**
-
-    - `times`: knot times, `(K,)`, s, strictly increasing.
-    - `positions`: mount positions at the knots, `(K, 3)`, m.
-    - `smoothing`: velocity ramp width at the knots, s (0: the paper's sharp corners).
-    """
-
-    path: PiecewiseLinear
-
-    def __init__(self, times, positions, smoothing: float = 0.0):
-        positions = _f64(positions)
-        if jnp.ndim(positions) != 2 or jnp.shape(positions)[1] != 3:
-            raise ValueError(
-                f"`positions` must have shape (K, 3), m; got {jnp.shape(positions)}."
-            )
-        self.path = PiecewiseLinear(times, positions, smoothing)
-
-    def kinematics(self, t):
-        return EndKinematics(self.path.value(t), self.path.rate(t), self.path.accel(t))
-
-
-class CoupledEnd(AbstractEnd):
-    """A mount whose kinematics another model supplies (a vessel): use
-    `tether.rates(t, y, effects, root=..., fast=...)`, which returns the end forces."""
-
-    def kinematics(self, t):
-        raise ValueError(
-            "a CoupledEnd has no kinematics of its own: call `rates(t, y, effects, "
-            "root=EndKinematics(...), fast=EndKinematics(...))` from the coupled model."
-        )
-
-
-class FreeEnd(AbstractEnd):
-    """A free running end (no mount, no end link). Only for `fast`."""
-
-    attached: ClassVar[bool] = False
-
-    def kinematics(self, t):
-        raise ValueError("a FreeEnd has no mount kinematics.")
 
 
 # ---------------------------------------------------------------------------
@@ -351,7 +160,7 @@ class _Chain(eqx.Module):
     active: Array | None  # elements in the computation (N,) bool, None = all
     tangents: Array  # element axes i_n (N, 3)
     F_ext: Array  # external loads on the elements (N, 3)
-    kin: TetherKinematics
+    kin: ChainKinematics
     inertia: Array  # element inertia mu, kg
     root: EndKinematics
     fast: EndKinematics | None
@@ -379,7 +188,7 @@ class AbstractTether(AbstractModel):
     released: PiecewiseLinear | None = None
     method: ClassVar[str]
     projects: ClassVar[bool] = False
-    accepts: ClassVar[tuple[type, ...]] = (AbstractTetherLoad,)
+    accepts: ClassVar[tuple[type, ...]] = (Gravity, Buoyancy, AbstractChainLoad)
     preset_system: ClassVar[str] = "tether"
 
     def __check_init__(self):
@@ -497,22 +306,25 @@ class AbstractTether(AbstractModel):
         else:
             X = jnp.concatenate([root.position[None], P, fast.position[None]], axis=0)
             XV = jnp.concatenate([root.velocity[None], V, fast.velocity[None]], axis=0)
-        dX = X[1:] - X[:-1]
-        dV = XV[1:] - XV[:-1]
-        l = safe_norm(dX)
-        u = dX / jnp.where(l > 0, l, 1.0)[:, None]
-        ldot = _dot(u, dV)
+        u, l, ldot, dV = links(X[:-1], X[1:], XV[:-1], XV[1:])
         if fast is None:
             tangents = jnp.concatenate([u[1:-1], u[-2:-1]], axis=0)
         else:
             tangents = u[1:]
-        kin = TetherKinematics(
-            P, V, tangents, self.element_mass, self.element_volume,
-            self.element_length, self.d,
-        )  # fmt: skip
+        each = lambda x: jnp.broadcast_to(x, (self.N,))
+        kin = ChainKinematics(
+            positions=P,
+            velocities=V,
+            tangents=tangents,
+            mass=each(self.element_mass),
+            volume=each(self.element_volume),
+            length=each(self.element_length),
+            wetted_length=each(self.element_length),
+            diameter=each(self.d),
+        )
         F_ext = jnp.zeros_like(P)
         for effect in loads:
-            F_ext = F_ext + effect.forces(t, kin, env)
+            F_ext = F_ext + effect.forces(t, kin, env).nodes
         if active is not None:
             F_ext = jnp.where(active[:, None], F_ext, 0.0)
         return _Chain(
@@ -631,7 +443,7 @@ class AbstractTether(AbstractModel):
         pot = jnp.zeros(())
         for effect in _loads(effects):
             if effect.constant:  # potential: minus the work of the constant force
-                work = _dot(effect.forces(0.0, ch.kin, env), ch.P)
+                work = _dot(effect.forces(0.0, ch.kin, env).nodes, ch.P)
                 pot = pot - jnp.sum(weights * work)
         return ke + pot + self._elastic_energy(ch)
 
@@ -642,9 +454,9 @@ class AbstractTether(AbstractModel):
 
 def _loads(effects):
     for e in effects:
-        if not isinstance(e, AbstractTetherLoad):
+        if not isinstance(e, AbstractTether.accepts):
             raise ValueError(
-                f"the tether takes tether effects (Weight, Buoyancy, Drag); got "
+                f"the tether takes chain loads (Gravity, Buoyancy, Drag); got "
                 f"{type(e).__name__} in `effects`."
             )
     return tuple(effects)

@@ -44,14 +44,8 @@ import numpy as np
 from .._environment import Environment, G, UniformCurrent
 from .._scene import Scene
 from .._validate import check_choice, check_int, check_nonnegative, check_positive
-from .effects import Buoyancy, Drag, Weight
-from .models import (
-    TETHER_METHODS,
-    FixedEnd,
-    PiecewiseLinear,
-    PrescribedEnd,
-    arc_state,
-)
+from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PiecewiseLinear, PrescribedEnd
+from .models import TETHER_METHODS, arc_state
 
 
 TANGENTIAL_AREAS = ("projected", "wetted")
@@ -152,10 +146,11 @@ def tether_fixed(
     )
     c_t_drag = c_t / np.pi if tangential_area == "projected" else c_t
     effects = (
-        Weight(),
+        Gravity(),
         Buoyancy(),
-        # `Drag` takes D_t = pi d l_e; c_t on d l_e is c_t/pi on pi d l_e.
-        Drag(c_t=c_t_drag, c_n=c_n, c_l=c_l),
+        # `Drag` takes the axial coefficient on pi d l_e; c_t on d l_e is c_t/pi
+        # on pi d l_e.
+        Drag(Cd=c_n, CdAx=c_t_drag, Cl=c_l if c_l else None),
     )
     env = Environment(g=g, rho_water=rho, current=UniformCurrent(current))
     y0 = arc_state(model, bulge=(-1.0, 0.0, 0.0), t0=float(np.asarray(times)[0]))
@@ -271,7 +266,7 @@ def tether_fold(
     y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
     return Scene(
         model=model,
-        effects=(Weight(), Buoyancy(), Drag()),
+        effects=(Gravity(), Buoyancy(), Drag(Cd=1.0, CdAx=0.1)),
         y0=y0,
         t1=t1,
         name="tether-fold",

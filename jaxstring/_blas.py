@@ -1,0 +1,43 @@
+"""OpenBLAS threads inside jaxstring's calls, and nowhere else.
+
+XLA:CPU's LAPACK kernels (the LU factorisations of the implicit solvers' Newton
+matrices) call the OpenBLAS bundled with SciPy. On small machines a multi-threaded
+OpenBLAS can make these small factorisations far slower than one thread does
+(docs/performance.md, "BLAS threads"), so jaxstring's solves run with one OpenBLAS
+thread. The limit holds only while a jaxstring call runs (`threadpoolctl`); the
+user's own NumPy and SciPy code keeps its thread count. A user who sets
+``OPENBLAS_NUM_THREADS`` keeps that value everywhere.
+"""
+
+import contextlib
+import functools
+import os
+
+import jax
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """Limit every loaded BLAS library to one thread while the block runs."""
+    if "OPENBLAS_NUM_THREADS" in os.environ:
+        yield
+        return
+    # The OpenBLAS that XLA:CPU's LAPACK calls loads with SciPy's LAPACK (at the
+    # first factorisation otherwise, after the limit would have been applied).
+    import scipy.linalg.cython_lapack  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def single_blas_thread(fn):
+    """`fn` run under `one_blas_thread`, its JAX outputs computed before the limit
+    is lifted (JAX dispatches asynchronously)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with one_blas_thread():
+            return jax.block_until_ready(fn(*args, **kwargs))
+
+    return wrapper
