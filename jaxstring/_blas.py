@@ -3,10 +3,10 @@
 XLA:CPU's LAPACK kernels (the LU factorisations of the implicit solvers' Newton
 matrices) call the OpenBLAS bundled with SciPy. On small machines a multi-threaded
 OpenBLAS can make these small factorisations far slower than one thread does
-(docs/performance.md, "BLAS threads"), so jaxstring's solves run with one OpenBLAS
-thread. The limit holds only while a jaxstring call runs (`threadpoolctl`); the
-user's own NumPy and SciPy code keeps its thread count. A user who sets
-``OPENBLAS_NUM_THREADS`` keeps that value everywhere.
+(docs/numerics.md, "BLAS and XLA notes"), so jaxstring's solves run with one
+OpenBLAS thread. The limit holds only while a jaxstring call runs
+(`threadpoolctl`); the user's own NumPy and SciPy code keeps its thread count. A
+user who sets ``OPENBLAS_NUM_THREADS`` keeps that value everywhere.
 """
 
 import contextlib

@@ -55,10 +55,9 @@ def enable_compilation_cache(
     cached (a `UserWarning` says so unless `warn=False`).
 
     `programs=True` also saves `simulate`'s traced solves (in `path`/programs), so
-    a later process skips tracing too: a k = 40 pendulum's second-process
-    `simulate` takes 0.56 s of CPU instead of 1.8 s. Loaded programs serve
-    forward solves only (`fit` and `sweep` trace as before); see
-    `jaxstring._programs` for what keys a saved program.
+    a later process skips tracing too (what that saves: docs/performance.md,
+    "Compile time"). Loaded programs serve forward solves only (`fit` and `sweep`
+    trace as before); see `jaxstring._programs` for what keys a saved program.
     """
     import warnings
 

@@ -2,24 +2,13 @@
 
 jaxlib 0.10 hands some fusions to YNNPACK by default. In a string solve these are
 small reductions over 2-4 components with a batch in front (the colour-batched JVPs
-of the banded Jacobian; the members of a vmapped sweep), which YNNPACK ran several
-times slower than XLA's own loop fusions on the 2-core machines:
-
-* banded Jacobian of the displacement string, 12 coloured JVPs: 4-5x slower at
-  k = 320 ... 1280 (`experiments/results/ynn_fusion.md`);
-* k = 20 pendulum sweep, 64 members, one group: 4.98 s -> 2.64 s without them
-  (`experiments/sweep_speed.py`).
+of the banded Jacobian; the members of a vmapped sweep), which YNNPACK runs several
+times slower than XLA's own loop fusions (measured: docs/numerics.md, "BLAS and XLA
+notes", and `experiments/results/ynn_fusion.md`).
 
 So `simulate`, `fit` and `sweep` compile with the option
 ``xla_cpu_experimental_ynn_fusion_type = ""`` on CPU. It is a per-compilation
 option: the user's own JAX code keeps XLA's defaults.
-
-A BDF solve at k = 640 over 2 s takes 15.8 s on its first call (compilation
-included), then 7.4 s and 7.2 s; with XLA's defaults 22.3 s, then 14.1 s; k = 1280,
-1 s: 22.4 s, then 14.8 s. (While BDF carried its Jacobian in the solver state, the
-first execution under this option ran 3-4 ms per step slower than later ones; with
-the Jacobian out of the state and the difference rows combined without `dot` and
-`cumsum`, that gap is gone, for Kvaerno5 and Rodas5P too.)
 """
 
 import functools

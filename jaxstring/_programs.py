@@ -3,7 +3,7 @@
 JAX's persistent compilation cache (`enable_compilation_cache`) saves the XLA
 compilation of a solve, but every new process still traces the solve in Python
 (diffrax traces a solver step three times), which costs more than the run itself
-for a small scene: 1.3 s of the 1.8 s CPU of a cached k = 40 pendulum `simulate`.
+for a small scene (measured: docs/performance.md, "Compile time").
 With a program folder set, `simulate` exports the traced solve once
 (`jax.export`) and later processes load it and run it without tracing; the
 program's compilation comes from the compilation cache as before.

@@ -8,8 +8,8 @@ member carries its own diffrax result code (`ok`, `status`).
 Why plain vmap is not enough on a CPU: a vmapped adaptive solve runs its members in
 lockstep -- every loop iteration advances all members, each with its own step size,
 until the slowest is done -- so the cost is (largest number of steps) x (members),
-against the sum of the steps for a loop. What helps (measured in
-experiments/sweep_speed.py):
+against the sum of the steps for a loop. What helps (measurements, and the designs
+not adopted: docs/numerics.md, "Sweeps: vmap, groups and lockstep"):
 
 * sharding: with several devices the members are split into one shard per
   device, each committed to its device, so that each device runs its own solver
@@ -17,16 +17,10 @@ experiments/sweep_speed.py):
   asynchronously from the calling thread: GPUs run them at the same time, while
   XLA:CPU runs a call's solver loops in the dispatching thread, so the CPU devices
   of ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` run theirs one after the
-  other (a thread per device ran them at the same time, but deadlocked inside
-  XLA:CPU on vmapped BDF groups of 8 members or more). (`jax.shard_map`, the
-  one-program form, needs `check_vma=False` for the solver loops; it runs the two
-  CPU shards side by side -- 64 members of the k = 40 pendulum, BDF in groups of
-  16: 0.86 s against 1.89 s on one device -- but deadlocks the same way on a
-  k = 8 string, every thread idle. A jit over `NamedSharding` inputs turns the
-  batched loop predicate into a cross-device reduction every step.)
+  other.
 * compiler options: the sweeps compile without XLA:CPU's YNNPACK fusions
   (`jaxstring._jit.cpu_jit`), which run the small reductions of vmapped string
-  models several times slower (one group of 64 members: 4.98 s -> 2.64 s).
+  models several times slower.
 * grouping (`batch_size`): members run in groups of `batch_size` (vmap inside a
   `lax.map`), so a slow member only holds up its own group; with `order="sort"` members
   are grouped by their parameter values, so that similar members (similar stiffness,
@@ -34,8 +28,8 @@ experiments/sweep_speed.py):
 * vmap with BDF: the displacement string's BDF step has no branch (a fresh
   Jacobian every step), so vmap computes nothing twice, and a step at k = 20-40 is
   a few hundred kernel launches that cost about the same for 16 members as for
-  one: 64 members in groups of 16 ran 4.5-6.3x faster than 64 CVODE-numba runs
-  in wall time (k = 40 and 20, `experiments/sweep_race.py`).
+  one (against a loop of CVODE runs: docs/performance.md, "A sweep against a peer
+  loop").
 * lockstep (`mode="lockstep"`), the fast one for the Kvaerno and fixed-step
   solvers: what costs in a vmapped solve is less
   the lockstep itself than what vmap makes of the solver's control flow: every
@@ -63,15 +57,11 @@ experiments/sweep_speed.py):
   group is block-tridiagonal like one long string's, and the fixed-step solver's
   own banded path (colouring JVPs, block cyclic reduction) serves the whole group.
 
-Where the time goes (string pendulum, k = 20, `experiments/sweep_speed.py`,
-`sweep_speed_profile.md`): a step of a single solve costs ~100-160 us of CPU, of
-which the implicit-step arithmetic (vector field, 12 JVPs, banded Jacobian and
-factorisation ~17 us, solves) is a minor part; the rest is per-iteration overhead
-of the solver loops, which a group shares between its members. In a vmapped
-fixed-step group of 16 (profiled) the block cyclic reduction takes about
-half of the op time and the solves a fifth: XLA:CPU runs the 4 x 4 block
-arithmetic at a few ns per flop whatever the layout (a members-last variant under
-`jax.custom_batching.custom_vmap` was no faster and was dropped).
+Where the time goes: a step of a single solve is mostly the per-iteration overhead
+of the solver loops, not the implicit step's arithmetic (vector field, coloured
+JVPs, banded Jacobian, factorisation, solves), and a group shares that overhead
+between its members (profile: docs/numerics.md, "Sweeps: vmap, groups and
+lockstep").
 """
 
 import copy
@@ -161,9 +151,8 @@ def _run_group(vals, scene, getters, fn, config, ts, batch_size):
     return jax.lax.map(member, vals, batch_size=batch_size)
 
 
-# The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`): k = 20
-# displacement pendulum, 64 members, implicit Euler dt = 0.005, one group of 64:
-# 4.98 s -> 2.64 s; groups of 16: 3.00 s -> 2.03 s (experiments/sweep_speed.py).
+# The sweeps compile without XLA:CPU's YNNPACK fusions (`jaxstring._jit`; measured:
+# docs/numerics.md, "Sweeps: vmap, groups and lockstep").
 @cpu_jit
 def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
     return _run_group(vals, scene, getters, fn, config, ts, batch_size)
@@ -369,10 +358,9 @@ def _sweep_devices(local, vals, scene, getters, fn, config, ts, batch_size, devi
     the calling thread; JAX dispatches asynchronously, so devices that run their
     programs asynchronously (GPUs) integrate their shards at the same time. XLA:CPU
     runs a call's solver loops in the dispatching thread, so CPU devices run their
-    shards one after the other. (One dispatching thread per CPU device ran them at
-    the same time, but a vmapped BDF solve, groups of 8 members or more, then
-    deadlocked inside XLA:CPU on its second call: both threads waiting for their
-    executions while every XLA worker thread sat idle.)
+    shards one after the other. (One dispatching thread per CPU device would run
+    them side by side, but deadlocks inside XLA:CPU on vmapped BDF groups:
+    docs/performance.md, "A sweep against a peer loop".)
     """
     n_dev = len(devices)
     size = vals[0].shape[0] // n_dev
@@ -585,29 +573,22 @@ def sweep(
       given order either way.
     - `mode`: `"vmap"` (default): each member has its own solve (its own step
       sequence), vmapped: the members' results equal those of `simulate` calls
-      to rounding; with `solver="bdf"` the fastest measured (see above).
+      to rounding; with `solver="bdf"` the fastest mode (docs/performance.md, "A
+      sweep against a peer loop").
       `"lockstep"`: all members (of a device) are integrated as one
       ODE on the stacked states, with one shared step sequence accepted only
       when every member's own error norm is within the tolerance, and
       block-diagonal (per-member) Newton linear algebra. Much faster on a CPU
-      (see `experiments/sweep_speed.py`); each member is then at least as
+      (docs/performance.md, "Sweeps"); each member is then at least as
       accurate as its own solve, but not bitwise equal to it (differences of the
       order of the tolerance). Supports `solver` "kvaerno3/4/5",
       "implicit_euler", "tsit5", "dopri5"; and the fixed-step "implicit_euler_fixed",
       "theta", "trapezoid" for node-major states (every member then takes its own
       solve's steps: with `newton_rtol = newton_atol = 1e-10` the members equal
       their `simulate` calls to rounding); not for sweeping `t0`/`t1`.
-      With lockstep, small groups (`batch_size` 4, `order="sort"`) were the
-      fastest in `experiments/sweep_speed.py` (string pendulum, k = 20, 64
-      members, Kvaerno3 at 1e-6, a loaded 2-core machine: 1.9-2.8x below a loop
-      of `simulate` calls in CPU time; groups of 16 1.5x, one group of 64 0.8x:
+      With lockstep, small groups (`batch_size` 4, `order="sort"`) serve best:
       the per-member cost of the batched Jacobian and factorisation grows with
-      the group, and a shared step sequence is set by its hardest member). The
-      fixed-step lockstep equals the loop to rounding but gained only 1.2-1.6x.
-      Compiled without YNNPACK fusions, on a quiet machine, with Newton started
-      from the previous step's increment (in the loop and the sweep alike):
-      fixed-step vmap in groups of 16 1.7-1.9x, equal to the loop to 2e-15 (on
-      two CPU devices the same: XLA:CPU runs their shards one after the other).
+      the group, and a shared step sequence is set by its hardest member.
     - `fallback`: lockstep only: when the shared solve fails (a failure of any
       member stops it), re-run the members with `mode="vmap"`, so that each gets
       its own status and the others are intact (`SweepResult.mode` says so).

@@ -247,8 +247,8 @@ class BlockTridiagonal(eqx.Module):
         z = jnp.zeros_like(X[:1])
         left = jnp.concatenate([z, X[:-1]], axis=0)
         right = jnp.concatenate([X[1:], z], axis=0)
-        # Broadcast multiply-adds (`_mv`), which XLA:CPU fuses into one loop; three
-        # batched `dot`s of 2 x 2 blocks were three slower kernels.
+        # Broadcast multiply-adds (`_mv`), which XLA:CPU fuses into one loop; batched
+        # `dot`s of 2 x 2 blocks are separate kernels.
         out = _mv(self.lower, left) + _mv(self.diag, X) + _mv(self.upper, right)
         return self._unpad(out)
 
@@ -388,8 +388,8 @@ def small_inv(a):
 
     XLA:CPU lowers ``jnp.linalg.inv`` to one LAPACK call per matrix of the batch;
     for the 3 x 3 ... 8 x 8 blocks of a string these elementwise ops (which XLA
-    fuses) are faster: 20 blocks of 6 x 6 in 7.7 us against LAPACK's 14 us (and
-    21 us with the batch as the first axis). Above 8 x 8 LAPACK is used.
+    fuses) are faster, and above 8 x 8 LAPACK is used (timings: docs/numerics.md,
+    "Banded linear algebra").
     """
     B = a.shape[-1]
     if B == 1:
@@ -449,8 +449,8 @@ def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
 # `bcr_solve` and `factor` are jitted functions called inside the solvers' traces:
 # diffrax traces a solver's step three times, and a nested jit traces each of these
 # once per shape (a cache hit after that); XLA inlines them, so the compiled program
-# is the same. k = 40 pendulum, trace and lowering of `simulate`: BDF 3.6 -> 2.7 s,
-# Rodas5P 2.2 -> 1.6 s (3 fresh processes each).
+# is the same and tracing is shorter (measured: docs/numerics.md, "BLAS and XLA
+# notes").
 @jax.jit
 def bcr_solve(fac: BCRFactor, f):
     """Solve with a `bcr_factor` factorisation; `f` has shape (N, B)."""

@@ -36,22 +36,22 @@ How it fits into diffrax (static shapes, fixed-size solver state):
   the predictor and I - c J factorised afresh when the Newton iteration fails with
   the stored factorisation (scipy), or when c = h / alpha_q has changed by more
   than 30 % since the last factorisation (also on the first step: `init` stores
-  a placeholder with c_lu = inf). The state keeps the factorisation only,
-  not J: scipy and CVODE refactorise a stored J on a change of c, but every array
-  of the solver state is copied through diffrax's accept/reject select and the
-  while loop, and J is the largest (48 doubles a node of a 2D string; at k = 640
-  carrying it cost 5-10 % of a step), while a fresh J costs one Jacobian
-  evaluation on the rare change of c and converges at least as well. A step whose
-  Newton iteration fails with a fresh J is rejected with factor 1/2. (diffrax
-  keeps the solver state of accepted steps only, so a Jacobian refreshed during a
-  rejected attempt is recomputed on the retry.) On the stiffest strings nearly
-  every rejection is such a Newton failure, so after a rejection the step may not
-  grow back past 90 % of the rejected one at once; that cap relaxes by 5 % per
-  accepted step (measured at k = 40, EA = 1e9, 0.5 s: 1250 -> 1170 attempts).
+  a placeholder with c_lu = inf). The state keeps the factorisation only, not J:
+  scipy and CVODE refactorise a stored J on a change of c, but every array of the
+  solver state is copied through diffrax's accept/reject select and the while
+  loop, and J is the largest (48 doubles a node of a 2D string; its cost:
+  docs/numerics.md, "BDF"), while a fresh J costs one Jacobian evaluation on the
+  rare change of c and converges at least as well. A step whose Newton iteration
+  fails with a fresh J is rejected with factor 1/2. (diffrax keeps the solver
+  state of accepted steps only, so a Jacobian refreshed during a rejected attempt
+  is recomputed on the retry.) On the stiffest strings nearly every rejection is
+  such a Newton failure, so after a rejection the step may not grow back past 90 %
+  of the rejected one at once; that cap relaxes by 5 % per accepted step (fewer
+  attempts: docs/numerics.md, "BDF").
 * Where the stored factorisation keeps failing, the attempt with it is skipped. In
   displacement variables the stiff springs turn with the string and a Jacobian from
-  the previous step contracted the Newton iteration in 0.07 % of the steps (k = 40,
-  rtol 1e-7); each failed attempt cost one or two vector fields and solves before
+  the previous step hardly ever contracts the Newton iteration (docs/numerics.md,
+  "BDF"); each failed attempt costs one or two vector fields and solves before
   the refresh. After `_SKIP_STORED_AFTER` accepted steps in a row that needed a
   refresh, the step takes a fresh Jacobian at once, and tries the stored one again
   every `_RETRY_STORED` steps (a success resets the count). Natural variables,
@@ -60,28 +60,24 @@ How it fits into diffrax (static shapes, fixed-size solver state):
   the displacement string) gets `reuse_jacobian=False` from `build_solver`: a
   fresh Jacobian at every step, no attempt with a stored one, and no
   factorisation in the solver state, whose copies through the while loop and the
-  accept/reject select go with it. Same steps and results; at k = 40, 2 s,
-  rtol 1e-6 the step went from 52 to 45 us (EA = 1e6, 2871 steps) and from 46 to
-  35 us (EA = 1e9, 5818 steps), process CPU, runs interleaved.
+  accept/reject select go with it: the same steps and results in less time per
+  step (docs/numerics.md, "BDF").
 * Stability guard. NDF orders >= 3 are not A-stable: on the imaginary axis they
   amplify for h omega in a band (NDF3: 0.01 ... 3.4 per step, growth up to 1.12 per
   step; NDF4: 0.01 ... 6.6; NDF5: 0.7 ... 9.3; with 1 % damping the lower ends move
   to 0.44, 0.59, 0.78). A mooring line with a heavy end mass (MoorDyn's test-suite
   pendulum: EA = 1e9 N, axial modes with zeta ~ 0.01, undamped transverse modes at
-  20-140 rad/s) puts such modes in the band; without the guard the grown mode made
-  the error test shrink h from 0.2 s to 1e-4 s at orders 3-4, and 100k steps ended
-  the run at t = 17 s of 40 s. An unresolved oscillation shows as scaled backward
-  differences that do not fall with the order (smooth strings: ratio
-  |D_(j+1)| / |D_j| ~ 0.1-0.6): at order q >= 3 with |D_(q+1)| > |D_q| or
-  |D_q| > |D_(q-1)| the order drops by one (to the A-stable 2 at most) and h is
-  not grown; the order is raised to 3, 4, 5 only while those ratios (and
-  |D_(q+2)| / |D_(q+1)|) are <= 0.3, 0.4, 0.65: for a resolved oscillation the
-  ratio is ~ h omega, and NDF5 is stable up to h omega = 0.7, NDF3/4 lose less than
-  1e-3 per step below 0.3/0.4. Measured on the MoorDyn pendulum (k = 20, 40.2 s):
-  118 / 2.7k / 28k steps at rtol 1e-4 / 1e-6 / 1e-8, end-mass errors 0.027 m /
-  4.8e-4 m / 5.2e-6 m (Kvaerno5: 4.6e-3 / 8.7e-5 / 1.2e-6; Rodas5P: 8.5e-4 / 2.3e-6
-  / 7.6e-9, L-stable, far better there); string pendulum k = 40 unchanged.
-  (CVODE's optional stability-limit detection, STALD, serves the same purpose.)
+  20-140 rad/s) puts such modes in the band; without a guard the grown mode makes
+  the error test shrink h until the step limit ends the run (docs/numerics.md,
+  "BDF"). An unresolved oscillation shows as scaled backward differences that do
+  not fall with the order (on smooth strings they do): at order q >= 3 with
+  |D_(q+1)| > |D_q| or |D_q| > |D_(q-1)| the order drops by one (to the A-stable
+  2 at most) and h is not grown; the order is raised to 3, 4, 5 only while those
+  ratios (and |D_(q+2)| / |D_(q+1)|) are <= 0.3, 0.4, 0.65: for a resolved
+  oscillation the ratio is ~ h omega, and NDF5 is stable up to h omega = 0.7,
+  NDF3/4 lose less than 1e-3 per step below 0.3/0.4 (the guarded BDF on the
+  MoorDyn pendulum: docs/numerics.md, "BDF"). (CVODE's optional stability-limit
+  detection, STALD, serves the same purpose.)
 * Gradients: the Newton solve is wrapped in ``jax.lax.custom_root``, so reverse mode
   does not differentiate the iteration: the tangent system uses the exact
   Jacobian at the solution (implicit function theorem). The stored Jacobian and the
@@ -154,7 +150,7 @@ def _combine(w, D):
     """`tensordot(w, D, axes=1)` for the few (<= 8) difference rows of D, as
     broadcast multiply-adds: XLA:CPU fuses these with their neighbours, whereas a
     `dot` with a contraction of 6 is a separate kernel, as slow as several passes
-    over D (k = 640: 29 us for the rescaling `T @ D`)."""
+    over D (docs/numerics.md, "BDF")."""
     w = jnp.asarray(w, D.dtype)
     lead = w.shape[:-1]
     out = 0.0
@@ -178,8 +174,8 @@ def _step_weights(order, factor, dtype):
 
     Computing these from the stored D in one pass each (``_combine``) replaces the
     rescaled copy of D, its concatenation with the last rows, and the stacked
-    reverse cumulative sum: on XLA:CPU those concatenations were slow separate
-    passes over D (k = 1280, per-operation profile: about 200 us of a step).
+    reverse cumulative sum: on XLA:CPU those concatenations are separate passes
+    over D (docs/numerics.md, "BDF").
     """
     n = MAX_ORDER + 3
     T6 = _change_matrix(order, factor)

@@ -9,12 +9,9 @@ factorisation in its state. Here the stages are unrolled at trace time (the
 coefficients are constants, zero terms vanish), each stage's simplified Newton
 iteration is one small while loop over (f, size, status), and one factorisation of
 ``I - h gamma J(t0, y0)`` serves every stage of a step (all the diagonal entries are
-gamma). Measured (experiments/esdirk_step.py, pendulum k = 40, 2 s, (eps, phi) and
-(eps, t) variables): at tolerances 1e-5 and 1e-7 an attempted step costs 0.50-0.76x
-diffrax's (107-196 us against 206-338 us) and a run 0.54-0.82x, with about as many
-XLA kernels (0.92-0.95x): diffrax's kernels are the dearer ones, not more. At 1e-3
-the steps are large, the stage iterations long, and the gain 0.8-0.9x ((eps, t):
-1.15x the time). The unrolled program compiles 1.4-1.8x longer (9.9-13.7 s).
+gamma). An attempted step runs about as many XLA kernels as diffrax's, but cheaper
+ones; the unrolled program takes longer to compile (measured against diffrax's
+Kvaerno: docs/numerics.md, "Kvaerno written out").
 
 Stage i solves, for its derivative f_i (f-space, as diffrax),
 
@@ -24,24 +21,22 @@ from diffrax's stage predictor ``sum_j a_pred_ij f_j``. Convergence (Hairer &
 Wanner, Solving ODEs II, IV.8), in the units of the state scaled by
 ``atol + rtol |y|``: converged when ``theta / (1 - theta) |dY| <= kappa`` with
 theta the observed contraction rate (the first update only when it is below
-``1e-3 kappa``: accepting it on the rate carried from the stage before, Radau5's
-test, gave 2-4x larger errors at the same tolerance in (eps, phi) variables and no
-gain in time); divergent when theta >= 1 or when the predicted error after the
-remaining iterations is above kappa. A stage
-that fails is retried once from its last iterate with a Jacobian taken there; if
-that fails too the step is rejected (infinite error estimate) and the controller
-(`NewtonLimitedController`) retries a shorter one.
+``1e-3 kappa``: a stage has no rate of its own before its second update, and
+accepting the first on the rate of the stage before, Radau5's test, let larger
+errors through; docs/numerics.md, "Kvaerno written out"); divergent when
+theta >= 1 or when the predicted error after the remaining iterations is above
+kappa. A stage that fails is retried once from its last iterate with a Jacobian
+taken there; if that fails too the step is rejected (infinite error estimate) and
+the controller (`NewtonLimitedController`) retries a shorter one.
 
 This solver takes one Jacobian per step: the right choice where the stiff force is
 linear in the state (natural variables, the tether, the tandem). Models whose stiff
 directions turn within a step (`SolverStructure.stage_jacobians`: the displacement
 string) run diffrax's Kvaerno with a Jacobian at every stage and `StageNewton`'s
-refreshes (`registry.kvaerno_class`). Written out here with a Jacobian per stage it was
-slower (k = 40, EA = 1e9, rtol 1e-6: 1.3 s and 12.7k steps against 0.65 s and
-3.5k): its Newton iteration converged at steps whose error estimate was then 1e3-1e7
-times the tolerance, and the PID controller grew the step back into them after each
-rejection; capping the step below such rejections, as after a Newton failure, gave
-0.82 s, still slower.
+refreshes (`registry.kvaerno_class`): written out here with a Jacobian per stage,
+its Newton iteration converged at steps whose error estimate was far above the
+tolerance, and the PID controller grew the step back into them after each
+rejection (measured: docs/numerics.md, "Kvaerno written out").
 
 The method is stiffly accurate (y1 is the last stage), so f(t1, y1) is the last
 stage derivative, carried to the next step (FSAL); dense output is the cubic

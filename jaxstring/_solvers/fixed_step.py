@@ -11,22 +11,20 @@
   A-stable; it equals the trapezoidal rule applied to (q, v).
 
 Both take a fixed step (use `diffrax.ConstantStepSize`; `simulate` does, with
-`dt0`, default 0.005 s). A fixed-step method cannot reject a step, so its nonlinear
+`SolveConfig.dt0`). A fixed-step method cannot reject a step, so its nonlinear
 solve must not give up early: by default (`newton="full"`) each step is solved by
 damped full Newton (a fresh Jacobian at every iteration). `newton="chord"` first
 tries simplified Newton updates with one factorisation of the Jacobian at the
 step's start (the production stiff codes' choice) and falls back to the damped full
-Newton from the step's start when they stall. Measured (k = 20, EA = 1e6, dt =
-0.005 s, Newton tolerance 1e-10): implicit Euler in natural variables
-2.8x faster with the chord; in displacement variables the chord diverges at this
-step (the stiff axis turns with the string; see `jaxstring._solvers.stage_newton`)
-and the fallback makes it about 5 % slower; the trapezoidal rule gains nothing. The
-Jacobian is banded for strings and chains (a few coloured JVPs and block cyclic
-reduction, ``jaxstring._linalg``), so a step stays O(k). The iteration stops when
-the scaled update (atol + rtol |y|, RMS) is below `kappa` (chord: the update times
-theta / (1 - theta), theta the observed contraction rate); a step whose iteration
-has not converged after `max_iters` ends the solve with a failed status (never a
-silently wrong result).
+Newton from the step's start when they stall: it pays where the stiff force is
+linear in the state (natural variables), not in displacement variables, where the
+stiff axis turns with the string (see `jaxstring._solvers.stage_newton`; measured:
+docs/numerics.md, "Fixed-step methods"). The Jacobian is banded for strings and
+chains (a few coloured JVPs and block cyclic reduction, ``jaxstring._linalg``), so
+a step stays O(k). The iteration stops when the scaled update (atol + rtol |y|,
+RMS) is below `kappa` (chord: the update times theta / (1 - theta), theta the
+observed contraction rate); a step whose iteration has not converged after
+`max_iters` ends the solve with a failed status (never a silently wrong result).
 
 Newmark needs the node-major layout of the string models: the first half of the
 columns of y are the positions q, the second half their rates v = q'.
@@ -210,8 +208,8 @@ def _newton(
             # Wanner's looser theta / (1 - theta) |bar| <= kappa saves one more
             # iteration but leaves the root about kappa * tol off, so a sweep no
             # longer reproduces the loop to rounding.) Newmark passes False: with
-            # it, Newmark's Newton diverged at step 329 of the k = 40, EA = 1e6
-            # pendulum at Newton tol 1e-6 (not understood).
+            # it, Newmark's Newton iteration diverged on the string pendulum (not
+            # understood; docs/numerics.md, "Fixed-step methods").
             done = (size > kappa) & (bar_size <= kappa)
             x_new = jnp.where(done, x_new - bar, x_new)
             size = jnp.where(done, 0.0, size)
@@ -300,8 +298,8 @@ class ThetaMethod(_NewtonFixedStep):
       are needed; the step still solves the same equation to the same test.
       Default (None): on for theta = 1 only. For theta < 1 the unresolved stiff
       components flip sign every step (amplification -(1 - theta) / theta), so
-      the previous increment points the wrong way for them: trapezoid on the
-      k = 40, EA = 1e6 pendulum took 0.45 s with it against 0.18 s without.
+      the previous increment points the wrong way for them (measured:
+      docs/numerics.md, "Fixed-step methods").
     """
 
     theta: float = eqx.field(static=True, default=0.5)

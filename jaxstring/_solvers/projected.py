@@ -2,12 +2,12 @@
 
 The Cartesian tangent of the natural-variable string must keep |t| = 1. Holding it
 with Baumgarte terms at the rate of the axial waves adds a stiff, critically damped
-(defective) mode that the embedded error estimates of ESDIRK methods handle badly:
-at EA = 1e9 Kvaerno5 then needed ~48k steps instead of ~300. Instead, after every
-accepted or attempted step, the new state is projected (t -> t/|t|, and the radial
-part of dt/dt removed) -- the standard projection method for ODEs on manifolds
-(Hairer, Lubich & Wanner, *Geometric Numerical Integration*, IV.4). The error
-estimate and dense output of the wrapped solver are kept as they are.
+(defective) mode that the embedded error estimates of ESDIRK methods handle badly
+(docs/numerics.md, "Projection"). Instead, after every accepted or attempted step,
+the new state is projected (t -> t/|t|, and the radial part of dt/dt removed) --
+the standard projection method for ODEs on manifolds (Hairer, Lubich & Wanner,
+*Geometric Numerical Integration*, IV.4). The error estimate and dense output of
+the wrapped solver are kept as they are.
 """
 
 import diffrax as dfx

@@ -61,21 +61,20 @@ _MAX_ITERS_ADAPTIVE = 10
 # diffrax's ESDIRKs take one Jacobian per step, at the predictor of their first
 # implicit stage, and start every later stage's Newton iteration from it. On the
 # displacement string that Jacobian is stale by the next stage (the stiff axis turns
-# with the string), so each stage refreshed it at its own iterate, and the refreshed
-# Jacobian was dropped at the end of the stage (diffrax carries the step's first
-# one): Kvaerno5 at k = 40 made 12-15 factorisations per attempted step at
-# EA = 1e6 and 1e9. Taking the Jacobian at each stage's own predictor instead
-# (diffrax's `every_stage`, as for DIRK methods) costs one factorisation per stage
-# and converges from there: at EA = 1e9 Kvaerno5 went from 8930 accepted steps in
-# 6.0 s to 3471 in 1.63 s (0.80x CVODE; docs, numerics); its step size
-# had been held down by Newton failures. In natural variables, whose stiff force is
-# linear in the state, the step's Jacobian serves every stage and the extra ones
-# only cost time (angle, k = 40, EA = 1e9: 0.47 s per step, 0.86 s per stage), so
-# the model chooses (`SolverStructure.stage_jacobians`). Where one Jacobian per
-# step serves, `build_solver` gives the written-out ESDIRK of `esdirk.py` (same
-# tableaux, about half the time per step); the classes below remain for a
-# Jacobian per stage and for `sweep`'s lockstep mode, whose stage solves factorise
-# per member (`StageNewton(linear_solver="batched")`).
+# with the string), so each stage would refresh it at its own iterate and drop the
+# refreshed Jacobian at the end of the stage (diffrax carries the step's first
+# one), several factorisations per stage. Taking the Jacobian at each stage's own
+# predictor instead (diffrax's `every_stage`, as for DIRK methods) costs one
+# factorisation per stage and converges from there, and the step size is no longer
+# held down by Newton failures (measured: docs/numerics.md, "A Jacobian per stage"
+# and "Where Kvaerno5 evaluates its Jacobian"). In natural variables, whose stiff
+# force is linear in the state, the step's Jacobian serves every stage and the
+# extra ones only cost time, so the model chooses
+# (`SolverStructure.stage_jacobians`). Where one Jacobian per step serves,
+# `build_solver` gives the written-out ESDIRK of `esdirk.py` (same tableaux,
+# cheaper steps: docs/numerics.md, "Kvaerno written out"); the classes below remain
+# for a Jacobian per stage and for `sweep`'s lockstep mode, whose stage solves
+# factorise per member (`StageNewton(linear_solver="batched")`).
 class Kvaerno3(dfx.Kvaerno3):
     """diffrax's Kvaerno3 with a Jacobian at every implicit stage's predictor."""
 
@@ -101,9 +100,8 @@ class ImplicitEuler(dfx.ImplicitEuler):
     error estimate, so the controller rejects it and retries a shorter one;
     diffrax's ImplicitEuler returns the failure with the finite error estimate of
     its last iterate, the step is kept, and the failure ends the solve ("maximum
-    number of steps was reached in the nonlinear solver"): the string pendulum
-    released with the slack law ended at its first snap (k = 10, EA = 1e4 N,
-    alpha = 0.01 s, t = 0.16 s; experiments/hard_cases.py)."""
+    number of steps was reached in the nonlinear solver"; the case that showed it:
+    docs/hard_cases.md, "What the matrix found")."""
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, y_error, dense, state, result = super().step(

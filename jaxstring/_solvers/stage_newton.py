@@ -30,20 +30,15 @@ slowly (rate > ``refresh_rate``), diverges, or contracts too slowly to converge
 within ``max_iters`` (Hairer's prediction), the Jacobian is recomputed at the
 current iterate, up to ``max_jacobians`` times per solve (default 10), before
 divergence is declared -- as production stiff codes refresh on convergence failure.
-(Refreshing on the prediction as well, and allowing 10 Jacobians instead of 3,
-halved Kvaerno5's steps at k = 40, EA = 1e6 and 1e9; the comparison is
-summarised in the docs' numerics page.) This is what
-makes the displacement string at EA >= 1e5 cheap: its stiff force
+This is what makes the displacement string at EA >= 1e5 cheap: its stiff force
 N = EA (|D r| - 1) t is strongly nonlinear in the state (the stiff axis turns with
 the string, and the transverse "geometric" stiffness N / h is proportional to a strain
 that the stage predictor gets wrong by an EA-magnified amount), so a Jacobian taken at
-the predictor contracts at a rate near 1 for any step that is not tiny. Measured at
-k = 10, EA = 1e9, 1 s, rtol = 1e-6: with the frozen predictor Jacobian Kvaerno5 made
-29.6k accepted steps and 38.5k rejected ones, *every* rejection a Newton failure and
-the error estimate of the accepted steps about 2e-5 of the tolerance (the step size
-was limited by Newton, never by accuracy); recomputing the Jacobian at the iterate
-brings it to about 350 accepted steps. (In natural variables the stiff force
-N = EA eps is linear in the state, which is why they never had the problem.)
+the predictor contracts at a rate near 1 for any step that is not tiny, and without
+a refresh the step size is limited by Newton, never by accuracy (measured:
+docs/numerics.md, "The stage Newton iteration" and "Jacobian refresh in the stage
+Newton iteration"). (In natural variables the stiff force N = EA eps is linear in
+the state, which is why they never had the problem.)
 
 Linear algebra (``linear_solver``): ``"auto"`` uses a block-tridiagonal Jacobian from
 a few coloured JVPs and block cyclic reduction (``jaxstring._linalg``) when the

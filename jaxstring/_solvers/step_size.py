@@ -1,14 +1,12 @@
 """Step-size control that learns where the stage Newton iteration stops converging.
 
-Measured (experiments/kvaerno_rejections.py): on the stiff string pendulum (k = 40,
-displacement variables, EA = 1e6, rtol = 1e-6) diffrax's Kvaerno5 with a
-`PIDController` rejected 2680 of 7550 step attempts, and *every* rejection but two
-was a failed stage Newton iteration (`nonlinear_divergence`), not a large error
-estimate. The error estimate is tiny at these steps, so the PID controller grows
-the step by 1.5-5x per step until the Newton iteration diverges; the failed step
-returns an infinite error, the controller cuts the step by `factormin` = 0.2, and
-the cycle restarts: a failure every third attempt, at step sizes 3-4x below the
-Newton limit on average.
+On a stiff string a `PIDController` driving an implicit Runge-Kutta method rejects
+steps for failed stage Newton iterations (`nonlinear_divergence`), not for large
+error estimates: the error estimate is tiny at these steps, so the PID controller
+grows the step until the Newton iteration diverges; the failed step returns an
+infinite error, the controller cuts the step by `factormin` = 0.2, and the cycle
+restarts, well below the Newton limit on average (measured: docs/numerics.md,
+"Step-size control after a failed stage Newton solve").
 
 `NewtonLimitedController` wraps a `PIDController` and adds what production stiff
 codes do after a convergence failure (CVODE limits the growth after a failed step;
@@ -122,9 +120,7 @@ def make_controller(
     if step_control == "auto" and rosenbrock:
         # A step may grow at most 3x (diffrax's default: 10x). Where the tension-only
         # law switches elements slack and taut, a 10x growth runs the next step
-        # into the kink and is rejected: on the slack-and-snap scenes (k = 40) a
-        # third of Rodas5P's attempts were rejections; a 3x cap cuts them by a
-        # third and the run time by 7-25 % (experiments/slack_snap.py). On smooth
-        # scenes the cap never binds (the race scenes take the same steps).
+        # into the kink and is rejected; on smooth scenes the cap never binds
+        # (measured: docs/numerics.md, "Rodas5P").
         return _PID(rtol=rtol, atol=atol, norm=norm, factormax=ROSENBROCK_FACTORMAX)
     return _PID(rtol=rtol, atol=atol, norm=norm)

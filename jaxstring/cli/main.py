@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 
-# Data are saved every 0.01 s.
+# Interval of the saved data, s.
 SAVE_DT = 0.01
 
 

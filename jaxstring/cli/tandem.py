@@ -7,10 +7,11 @@ Returns an exit code: 0 when every check of the spec the run can make passes,
 
 All simulations with the massless hawser use `tsit5` (explicit, adaptive): the
 tandem is not stiff (the fastest mode is the hawser-surge mode at 0.042 rad/s),
-and an implicit solver takes as many steps at ~8x the cost per step (see
-experiments/tanker_*.py). With `--hawser line` (fishtail and controlled scenes)
-the hawser is a line with mass and drag (`with_line`), whose axial mode at
-~120 rad/s calls for an implicit solver: `rodas5p` at rtol = atol = 1e-7.
+and an implicit solver takes about as many steps, each dearer (docs/numerics.md,
+"The massless tandem's explicit solver"). With `--hawser line` (fishtail and
+controlled scenes) the hawser is a line with mass and drag (`with_line`), whose
+axial mode at ~120 rad/s calls for an implicit solver: `rodas5p` at
+rtol = atol = 1e-7.
 """
 
 import math

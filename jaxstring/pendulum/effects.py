@@ -150,10 +150,9 @@ class Slack(AbstractTensionLaw):
 
     The sharp law's kinks (zero strain, zero force), on which the elements of a
     falling slack string sit, make error-controlled implicit solvers in natural
-    variables reject steps down to 1e-13 s; with eps_s = 1e-7 (the pendulum scene's
-    default in natural variables) the paper's snap at k = 40 completes; at k = 10
-    the end mass moves by about 4e-5 m (EA = 1e8 N) to 1.4e-4 m (EA = 1e6 N),
-    15-30x less per decade of eps_s below (docs/pendulum.md, "Slack and snap").
+    variables reject steps down to tiny sizes; eps_s = 1e-7 is the pendulum scene's
+    default in natural variables (what it does to the steps and the end mass:
+    docs/pendulum.md, "Slack and snap").
 
     **Arguments:**
 

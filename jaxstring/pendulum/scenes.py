@@ -20,12 +20,11 @@ from .models import FORMULATIONS
 DEFAULT_PENDULUM_EFFECTS = ("gravity", "kelvin_voigt")
 
 # The transition strain of the tension-only law that `effects=("slack",)` builds,
-# per formulation (experiments/slack_snap.py): in natural variables the smoothed
-# onset lets the string go slack and snap taut in 1.5 to over 7x fewer steps (the
-# EA = 1e8 N snap at k = 40, which stopped at 200k steps, completes in 14-15k) and
-# moves the end mass by about 4e-5 m at EA = 1e8 N (k = 10); in displacement
-# variables a blend that narrow stalls the implicit solvers' Newton iteration (the
-# strain is a difference of positions), so the sharp law stays.
+# per formulation: in natural variables the smoothed onset lets the string go slack
+# and snap taut in far fewer steps, at a small change of the end mass; in
+# displacement variables a blend that narrow stalls the implicit solvers' Newton
+# iteration (the strain is a difference of positions), so the sharp law stays
+# (measured: docs/pendulum.md, "Slack and snap").
 SLACK_SMOOTHING = {"displacement": 0.0, "natural": 1e-7, "angle": 1e-7}
 
 

@@ -510,8 +510,9 @@ class AceamTether(AbstractTether):
     """Tether with the paper's ACEAM regulator (inverse dynamics, section 4.4).
 
     Reference model of each regulated link length l_m with target g_m:
-    a_m = ((g_m - l_m)/T - dl_m/dt)/T1 (critically damped at the paper's T = 0.1 s,
-    T1 = 0.025 s). The 1-D axial model mu a_d(n) = F_T(n) - F_T(n-1) + F_ext,s(n),
+    a_m = ((g_m - l_m)/T - dl_m/dt)/T1 (critically damped at the paper's
+    T = 0.1 s, T1 = 0.025 s). The 1-D axial model
+    mu a_d(n) = F_T(n) - F_T(n-1) + F_ext,s(n),
     a_d(m+1) - a_d(m) = a_m (external forces projected on each element's axis i_n)
     gives the tensions, which then act along the links in 3-D. End links are
     proportional links F = k (l - g)/L_link.
