@@ -357,7 +357,7 @@ def tight_reference(scene, ts, rtol=1e-10):
 
 def run_peer(rhs, peer, jac, ts, *, rtol, atol, repeats=3):
     """Time one external reference (see references.py) on the JAX-compiled RHS."""
-    import references
+    from jaxstring.testing import references
 
     tm, out = timed_split(
         rhs.compile, lambda: references.solve(rhs, peer, ts, rtol, atol, jac), repeats

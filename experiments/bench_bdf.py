@@ -27,8 +27,9 @@ from bench_solvers import solver_block
 def run_scipy_bdf(scene, ts, rtol, atol, repeats):
     """scipy.integrate.solve_ivp(method="BDF") with the sparse JAX Jacobian; step
     count from its own step sequence (no t_eval), save times from dense output."""
-    from references import JaxRHS
     from scipy.integrate import solve_ivp
+
+    from jaxstring.testing.references import JaxRHS
 
     rhs = JaxRHS(scene)
     out = {}

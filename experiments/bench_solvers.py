@@ -83,7 +83,7 @@ def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
 
 
 def run_cvode(scene, ts, rtol, atol, repeats):
-    from references import JaxRHS, solve
+    from jaxstring.testing.references import JaxRHS, solve
 
     rhs = JaxRHS(scene)
     out = {}

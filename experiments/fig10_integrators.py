@@ -5,8 +5,8 @@ paper's settings (k = 40, 2 s; fixed-step methods dt = 0.005 s = 400 steps;
 adaptive ones rtol = atol = 1e-7; Newton tolerance 1e-7)? Every jaxstring solver
 in ``jaxstring.SOLVERS`` runs (new ones appear automatically), next to the strongest
 peers: CVODE BDF with the band linear solver on an independent numba implementation
-of the same equations (experiments/peers.py), and scipy's Radau, BDF and LSODA on the
-same compiled functions; CVODE driving jaxstring's JAX functions through Python
+of the same equations (jaxstring/testing/peers.py), and scipy's Radau, BDF and LSODA
+on the same compiled functions; CVODE driving jaxstring's JAX functions through Python
 callbacks is a labelled second row (``--no_callback`` leaves it out). Each row has
 the end-mass error against CVODE-numba at rtol = atol = 1e-11, and a second table
 says where jaxstring's implicit time goes (Jacobians, LU, Newton).
@@ -21,10 +21,9 @@ import _common as common
 import jax
 import jax.numpy as jnp
 import numpy as np
-import peers
-import references
 
 import jaxstring
+from jaxstring.testing import peers, references
 
 
 CVODE = "CVODE-numba"
@@ -318,12 +317,13 @@ def main(
             f"err_m: max end-mass distance over {len(ts)} save times from {ref_label}"
             " (same variables).",
             f"{CVODE}: CVODE BDF (scikit-sundae), band linear solver, on the numba "
-            "right-hand side of experiments/peers.py (checked against jaxstring's "
-            "vector field in tests/test_peers.py); scipy-* numba: solve_ivp on the "
-            "same compiled function with the same Jacobian option; analytic band "
-            "Jacobian where the peer has one (displacement), else banded difference "
-            f"quotients. {CALLBACK}: CVODE driving jaxstring's own JAX functions "
-            "through Python callbacks, JAX band Jacobian (a second row, for scale).",
+            "right-hand side of jaxstring/testing/peers.py (checked against "
+            "jaxstring's vector field in tests/test_peers.py); scipy-* numba: "
+            "solve_ivp on the same compiled function with the same Jacobian option; "
+            "analytic band Jacobian where the peer has one (displacement), else "
+            f"banded difference quotients. {CALLBACK}: CVODE driving jaxstring's own "
+            "JAX functions through Python callbacks, JAX band Jacobian (a second row, "
+            "for scale).",
         ],
     )
     # Where the time goes (at the stiffest EA that ran).

@@ -4,10 +4,10 @@ Question: which set of variables -- displacement, natural (eps, t) or natural
 (eps, phi) -- is cheapest to integrate as the string gets stiffer (EA = 1e4 ... 1e9),
 with jaxstring's BDF, Kvaerno5 (the ESDIRK method of the paper's gap) and Rodas5P,
 and how far is each from CVODE as an expert sets it up? The peer is
-experiments/peers.py: the same equations in numba, CVODE BDF with the band linear
+jaxstring/testing/peers.py: the same equations in numba, CVODE BDF with the band linear
 solver and the analytic banded Jacobian (displacement variables) or CVODE's banded
 difference quotients (natural variables). IDA driving jaxstring's own JAX functions
-through Python callbacks (experiments/references.py, band Jacobian from JAX) is a
+through Python callbacks (jaxstring/testing/references.py, band Jacobian from JAX) is a
 second, labelled row (``--no_callback`` leaves it out).
 
 Settings: the paper's pendulum, k = 40, alpha = 0.01 s, released horizontal, 2 s,
@@ -29,9 +29,9 @@ import statistics
 
 import _common as common
 import numpy as np
-import peers
 
 import jaxstring
+from jaxstring.testing import peers
 
 
 FORMULATIONS = ("displacement", "natural", "angle")
@@ -71,7 +71,7 @@ def _cvode_code(peer, y0, ts, tol, jac):
 
 
 def _callback_code(scene, ts, tol, max_fev):
-    import references
+    from jaxstring.testing import references
 
     rhs = references.JaxRHS(scene, max_fev=max_fev)
 
@@ -208,14 +208,15 @@ def main(
             f"x_cvode_cpu, x_cvode_wall = time / {CVODE}'s at the same formulation "
             "and EA, measured in the same interleaved rounds.",
             f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
-            "numba right-hand side of experiments/peers.py; analytic banded "
+            "numba right-hand side of jaxstring/testing/peers.py; analytic banded "
             "Jacobian in displacement variables, CVODE's banded difference "
             "quotients in natural variables. "
             + (
                 "The callback IDA row was left out (--no_callback)."
                 if no_callback
                 else f"{CALLBACK}: IDA with the band Jacobian from JAX, jaxstring's "
-                "vector field through Python callbacks (experiments/references.py)."
+                "vector field through Python callbacks "
+                "(jaxstring/testing/references.py)."
             ),
             f"err_m: largest end-mass distance at the {len(ts)} save times from "
             f"{CVODE} at rtol = atol = {REF_TOL:g} in the same variables; "

@@ -1,12 +1,12 @@
 """The race against the strongest peers: time to reach an end-mass error target.
 
 Question: at equal error, how long does jaxstring take against CVODE as an expert
-sets it up? The peer is experiments/peers.py: the same equations in numba, CVODE BDF
-with the band linear solver and the analytic banded Jacobian (displacement
+sets it up? The peer is jaxstring/testing/peers.py: the same equations in numba,
+CVODE BDF with the band linear solver and the analytic banded Jacobian (displacement
 variables) or CVODE's banded difference quotients (natural variables), and scipy's
 BDF, Radau and LSODA on the same compiled functions. CVODE driving jaxstring's own
-JAX functions through Python callbacks (experiments/references.py, band Jacobian from
-JAX) is a second, labelled row.
+JAX functions through Python callbacks (jaxstring/testing/references.py, band
+Jacobian from JAX) is a second, labelled row.
 
 Scene: the paper's pendulum (k = 40, alpha = 0.01 s, released horizontal, 2 s), EA =
 1e6 and 1e9, displacement and (eps, phi) variables (`--formulations` adds natural
@@ -39,9 +39,9 @@ import os
 
 import _common as common
 import numpy as np
-import peers
 
 import jaxstring
+from jaxstring.testing import peers
 
 
 FORMULATIONS = ("displacement", "angle")
@@ -129,7 +129,7 @@ def _codes(scene, peer, ts, solvers, scipy_methods, callback, budget_s, numba_s)
             )
         )
     if callback:
-        import references
+        from jaxstring.testing import references
 
         rhs = references.JaxRHS(scene, max_fev=int(2e5 * budget_s))
 

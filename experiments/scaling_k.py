@@ -2,10 +2,10 @@
 
 Question: how does run time grow with k = 10 ... 640 (the paper reports about k^2)
 for the best jaxstring solver and for CVODE as an expert sets it up? The main peer
-is CVODE-numba (experiments/peers.py): the same equations in numba, CVODE BDF with
+is CVODE-numba (jaxstring/testing/peers.py): the same equations in numba, CVODE BDF with
 the band linear solver and the analytic band Jacobian (displacement variables) or
 CVODE's band difference quotients ((eps, phi) variables). CVODE driving jaxstring's
-own JAX functions through Python callbacks (experiments/references.py, band
+own JAX functions through Python callbacks (jaxstring/testing/references.py, band
 Jacobian from JAX) is a second, labelled row. The best jaxstring solver is the
 fastest implicit adaptive one at the second k (every candidate runs at the first
 two k). A configuration stops growing k when one run takes longer than the budget.
@@ -33,7 +33,7 @@ over CVODE-numba's at the same k.
 
 Run: ``python experiments/scaling_k.py [--quick] [--formulation displacement]
 [--start swing] [--peers cvode-numba,cvode-BDF] [--rounds 3] [--tol 1e-6]``
-(``--peers``: ``cvode-numba`` and the names of experiments/references.py, run on
+(``--peers``: ``cvode-numba`` and the names of jaxstring/testing/references.py, run on
 JAX callbacks; ``none``: jaxstring alone).
 """
 
@@ -43,9 +43,9 @@ import statistics
 
 import _common as common
 import numpy as np
-import references
 
 import jaxstring
+from jaxstring.testing import references
 
 
 KS = (10, 20, 40, 80, 160, 320, 640)
@@ -88,7 +88,7 @@ def _jaxstring_code(scene, name, ts, tol):
 
 
 def _numba_code(formulation, k, EA, y0, ts, tol):
-    import peers
+    from jaxstring.testing import peers
 
     peer = peers.make_rhs(formulation, k, EA, alpha=ALPHA)
     jac = "analytic" if peer.jac is not None else "dq"
@@ -164,7 +164,7 @@ def main(
 ):
     """Run the k-scaling study; return (rows, exponents).
 
-    `peers`: "cvode-numba" (the main peer) and names of experiments/references.py
+    `peers`: "cvode-numba" (the main peer) and names of jaxstring/testing/references.py
     (CVODE, IDA, scipy on jaxstring's JAX functions through callbacks); default
     cvode-numba and cvode-BDF (quick: cvode-numba).
 
@@ -309,11 +309,11 @@ def main(
             *([note] if note else []),
             *([ratio_note] if ratio_note else []),
             f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
-            "numba right-hand side of experiments/peers.py (analytic band Jacobian "
-            "in displacement variables, CVODE's band difference quotients "
+            "numba right-hand side of jaxstring/testing/peers.py (analytic band "
+            "Jacobian in displacement variables, CVODE's band difference quotients "
             "otherwise), from jaxstring's initial state of the scene. 'on JAX "
             "callbacks': jaxstring's vector field and band Jacobian through "
-            "Python callbacks (experiments/references.py).",
+            "Python callbacks (jaxstring/testing/references.py).",
             f"diff_m: largest end-mass distance at the {len(ts)} save times to "
             f"{CVODE} at the same k (to the first successful run where it failed).",
             "run_s (wall), cpu_s (process CPU, all threads): medians of `repeats` "

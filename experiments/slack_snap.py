@@ -8,7 +8,7 @@ how much does it change the answer? Cases (alpha = 0.01, rtol = atol = 1e-6, 2 s
 200k steps at most): EA = 1e8 N released from 3 pi/4 ("snap"), EA = 1e6 N released
 from 170 deg ("170deg"). Each run is compiled on a 10 ms span of the same scene
 first (`compile_s`); `run_s` and `cpu_s` are one full run (wall and process CPU).
-The CVODE-numba peer (experiments/peers.py, sharp law) runs the same cases.
+The CVODE-numba peer (jaxstring/testing/peers.py, sharp law) runs the same cases.
 
 Error: the largest end-mass distance over 41 save times from Rodas5P at
 rtol = atol = 1e-10 with eps_s = 1e-9, the stand-in for the sharp law (whose own
@@ -135,7 +135,7 @@ def reference(formulation, case, k, smoothing=REF_SMOOTHING, rtol=REF_TOL):
 def run_cvode(formulation, case, k):
     """The CVODE-numba peer with the sharp law (band Jacobian: analytic in
     displacement variables, CVODE's difference quotients otherwise)."""
-    import peers
+    from jaxstring.testing import peers
 
     c = CASES[case]
     peer = peers.make_rhs(formulation, k=k, EA=c["EA"], alpha=0.01, slack=True)

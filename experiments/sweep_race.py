@@ -4,7 +4,7 @@ Question: is one compiled jaxstring sweep faster than the strongest peer run mem
 by member? Case: the pendulum in displacement variables (EA = 1e6 N, 2 s, k = 20
 and 40), 64 Kelvin-Voigt constants alpha in [0.005, 0.05] s. The peer: CVODE BDF,
 numba right-hand side, analytic banded Jacobian, band linear solver
-(experiments/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
+(jaxstring/testing/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
 jaxstring: `sweep` (`--mode` vmap or lockstep, groups of `--group` sorted by alpha,
 on every device of JAX's default backend: the script sets
 `--xla_force_host_platform_device_count=2`, whose two CPU devices run their shards
@@ -29,10 +29,10 @@ from sweep_speed import end_mass  # isort: skip
 
 import _common as common
 import numpy as np
-import peers
 
 import jaxstring as js
 from jaxstring._sweep import sweep
+from jaxstring.testing import peers
 
 
 def _cvode_loop(k, alphas, ts, tol):

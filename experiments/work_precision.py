@@ -18,9 +18,9 @@ import math
 
 import _common as common
 import numpy as np
-import references
 
 import jaxstring
+from jaxstring.testing import references
 
 
 FORMULATIONS = ("displacement", "natural", "angle")
