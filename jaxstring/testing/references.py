@@ -18,25 +18,17 @@ Jacobian variants (``jac=``):
 
 The JIT compile of f and its Jacobian is timed separately (``JaxRHS.compile``).
 Peers that are not installed are skipped (``available()``); they live in the
-optional ``bench`` extra, never in jaxstring's core.
-
-Run as a script for a one-scene comparison: ``python experiments/references.py``.
+optional ``bench`` extra (``pip install ".[bench]"``), never in jaxstring's core.
+Used by the tests and the benchmarks; ``experiments/references.py`` compares them
+on one scene.
 """
 
-import os
-
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse
 import importlib.util
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-import jaxstring
 
 
 PEERS = ("scipy-Radau", "scipy-BDF", "scipy-LSODA", "cvode-BDF", "ida")
@@ -312,92 +304,3 @@ def solve(rhs: JaxRHS, peer: str, ts, rtol: float, atol: float, jac: str = "jax"
     out["nfev"] = rhs.nfev
     out["njev"] = rhs.njev
     return out
-
-
-def main(
-    quick: bool = False,
-    formulation: str = "displacement",
-    EA: float = 1e6,
-    k: int = 40,
-    rtol: float = 1e-7,
-):
-    """Time every available peer and Jacobian variant on one scene (a sanity table)."""
-    from _common import set_quick
-
-    set_quick(quick)
-    from _common import end_mass_error, timed, timed_split, write_table
-
-    if quick:
-        k, EA = 8, 1e4
-    scene = jaxstring.scenes.string_pendulum(formulation=formulation, k=k, EA=EA)
-    ts = np.linspace(float(scene.t0), float(scene.t1), 41)
-    rhs = JaxRHS(scene)
-    f_us, j_us = rhs.call_cost_us()
-    ref_t, ref = timed(
-        lambda: jaxstring.simulate(scene, "kvaerno5", rtol=rtol, atol=rtol, ts=ts),
-        repeats=1 if quick else 3,
-    )
-    ref_end = np.asarray(ref.end_mass)
-    rows = [
-        {
-            "peer": "jaxstring kvaerno5",
-            "jac": "jax (in-jit)",
-            "ok": ref.ok,
-            "compile_s": ref_t.compile_s,
-            "run_s": ref_t.run_s,
-            "nfev": "-",
-            "njev": "-",
-            "err_vs_kvaerno5_m": 0.0,
-        }
-    ]
-    ok = available()
-    for peer in PEERS:
-        if not ok[peer]:
-            print(f"skip {peer}: not installed")
-            continue
-        for jac in JACOBIANS:
-            tm, out = timed_split(
-                rhs.compile,
-                lambda p=peer, j=jac: solve(rhs, p, ts, rtol, rtol, j),
-                repeats=1 if quick else 3,
-            )
-            err = (
-                end_mass_error(rhs.end_mass(out["ys"]), ref_end)
-                if out["ok"]
-                else float("nan")
-            )
-            rows.append(
-                {
-                    "peer": peer,
-                    "jac": jac,
-                    "ok": out["ok"],
-                    "compile_s": tm.compile_s,
-                    "run_s": tm.run_s,
-                    "nfev": out["nfev"],
-                    "njev": out["njev"],
-                    "err_vs_kvaerno5_m": err,
-                }
-            )
-    write_table(
-        "references_quick" if quick else "references",
-        rows,
-        "peer jac ok compile_s run_s nfev njev err_vs_kvaerno5_m".split(),
-        f"External references on the identical RHS: {formulation}, k={k}, EA={EA:g}, "
-        f"rtol=atol={rtol:g}",
-        notes=[
-            f"one JAX f call from NumPy: {f_us:.1f} us; one Jacobian call: "
-            f"{j_us:.1f} us (n = {rhs.n}, band l={rhs.lband} u={rhs.uband})",
-            f"JIT compile of f + Jacobian: {rhs.compile_s:.2f} s (not in run_s)",
-        ],
-    )
-    return rows
-
-
-if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--formulation", default="displacement")
-    p.add_argument("--EA", type=float, default=1e6)
-    p.add_argument("--k", type=int, default=40)
-    a = p.parse_args()
-    main(quick=a.quick, formulation=a.formulation, EA=a.EA, k=a.k)
