@@ -20,7 +20,6 @@ Run: ``python experiments/sweep_race.py [--quick]``.
 """
 
 import os
-import time
 
 
 # Imported first: it gives JAX two host CPU devices (the machine's two cores) and
@@ -66,9 +65,8 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode, peer_membe
     picked = alphas[::stride]
     ts = np.linspace(0.0, 2.0, 5)
     numba_s = peers.make_rhs("displacement", k, 1e6).warmup()
-    t0 = time.perf_counter()
-    refs = _cvode_loop(k, picked, ts, 1e-10)
-    print(f"k={k}: references in {time.perf_counter() - t0:.1f} s", flush=True)
+    refs, wall, _ = common.clock(lambda: _cvode_loop(k, picked, ts, 1e-10))
+    print(f"k={k}: references in {wall:.1f} s", flush=True)
     base = js.scenes.string_pendulum(k=k, EA=1e6, t1=2.0)
 
     def run_sweep(tol):
@@ -128,14 +126,21 @@ def main(quick=False, ks=None, members=None, solver="bdf", tols=None,
     members = members or (8 if quick else 64)
     peer_members = min(peer_members or members, members)
     if members % peer_members:
-        raise ValueError(
-            f"peer_members={peer_members} must divide members={members}"
-        )
+        raise ValueError(f"peer_members={peer_members} must divide members={members}")
     tols = tols or [3e-6, 2e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
     repeats = repeats or (1 if quick else 2)
     rows = [
-        race_k(k, members, solver, tols, cvode_tol, repeats, min(group, members), mode,
-               peer_members)  # fmt: skip
+        race_k(
+            k,
+            members,
+            solver,
+            tols,
+            cvode_tol,
+            repeats,
+            min(group, members),
+            mode,
+            peer_members,
+        )  # fmt: skip
         for k in ks
     ]
     cols = (
