@@ -90,8 +90,8 @@ def main(quick=False):
                 max_steps=100_000,
             )
         )
-        truth = dict(zip(("C_Y1", "C_Y2"), zip(PARAMS, true_vals)))
-        rows.append(common.fit_row(seed, res, wall, truth, "sigma_deg"))
+        true_of = dict(zip(("C_Y1", "C_Y2"), zip(PARAMS, true_vals)))
+        rows.append(common.fit_row(seed, res, wall, true_of, "sigma_deg"))
     c1 = np.array([r["C_Y1"] for r in rows])
     c2 = np.array([r["C_Y2"] for r in rows])
     later = float(np.median([r["wall_s"] for r in rows[1:]]))
