@@ -20,52 +20,53 @@ import importlib.util
 import os
 
 import _common as common
+import harness
 import numpy as np
-from bench_solvers import solver_block
+from bench_solvers import NAMES, solver_block
 
 
-def run_scipy_bdf(scene, ts, rtol, atol, repeats):
+def scipy_bdf_code(scene, ts):
     """scipy.integrate.solve_ivp(method="BDF") with the sparse JAX Jacobian; step
     count from its own step sequence (no t_eval), save times from dense output."""
-    from references import JaxRHS
     from scipy.integrate import solve_ivp
 
-    rhs = JaxRHS(scene)
-    out = {}
+    from jaxstring.testing.references import JaxRHS
 
-    def go():
+    rhs = JaxRHS(scene)
+
+    def call(tol):
         rhs.reset()
-        out["sol"] = solve_ivp(
+        sol = solve_ivp(
             rhs.f,
             (rhs.t0, rhs.t1),
             rhs.y0,
             method="BDF",
-            rtol=rtol,
-            atol=atol,
+            rtol=tol,
+            atol=tol,
             jac=rhs.jac_sparse,
             dense_output=True,
         )
-        return out["sol"]
+        return {
+            "ok": bool(sol.success),
+            "status": str(sol.message)[:60],
+            "accepted": len(sol.t) - 1,
+            "nfev": int(sol.nfev),
+            "njev": int(sol.njev),
+            "nlu": int(sol.nlu),
+            "end": (
+                np.asarray(rhs.end_mass(sol.sol(np.asarray(ts)).T))
+                if sol.success
+                else None
+            ),
+        }
 
-    tm, _ = common.timed_split(rhs.compile, go, repeats)
-    sol = out["sol"]
-    row = {
-        "solver": "scipy BDF (sparse JAX Jacobian)",
-        "ok": bool(sol.success),
-        "status": str(sol.message)[:60],
-        "compile_s": tm.compile_s,
-        "run_s": tm.run_s,
-        "repeats": tm.n,
-        "steps": len(sol.t) - 1,
-        "rejected": None,
-        "nfev": int(sol.nfev),
-        "njev": int(sol.njev),
-        "nlu": int(sol.nlu),
-    }
-    row["end"] = (
-        np.asarray(rhs.end_mass(sol.sol(np.asarray(ts)).T)) if sol.success else None
-    )
-    return row
+    return harness.Code("scipy BDF (sparse JAX Jacobian)", "scipy", call, rhs.compile)
+
+
+def run_scipy_bdf(scene, ts, rtol, atol, repeats):
+    """scipy's BDF row: the JIT compile apart, then the median of `repeats`."""
+    r = harness.repeat(scipy_bdf_code(scene, ts), rtol, repeats, first=False)
+    return harness.rows([r], NAMES, drop=())[0]  # scored later
 
 
 def main(quick=False, repeats=3, EAs=None, k=None, scipy_bdf=True):

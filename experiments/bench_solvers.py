@@ -22,12 +22,11 @@ Run: ``python experiments/bench_solvers.py [--quick]`` (quick: k = 10, 0.5 s, EA
 
 import argparse
 import importlib.util
-import math
 import os
-import time
 
 import _common as common
 import diffrax as dfx
+import harness
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
@@ -65,58 +64,54 @@ def _solver(name, rtol, atol):
     return name
 
 
-def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
-    # "-pid": diffrax's plain PIDController (before NewtonLimitedController)
-    extra = {"step_control": "pid"} if name.endswith("-pid") else {}
-    return common.run_jaxstring(
-        scene,
-        _solver(name, rtol, atol),
-        ts,
-        rtol=rtol,
-        atol=atol,
-        dt0=0.005,
-        repeats=repeats,
-        max_steps=max_steps,
-        label=name,
-        **extra,
+# The columns of this study's tables that have other names in a harness record.
+NAMES = {"code": "solver", "wall_s": "run_s", "accepted": "steps"}
+
+
+def solver_code(scene, name, ts, rtol, atol, max_steps=400_000):
+    """Solver `name` (or a variant built here) on `scene`; fixed-step solvers at
+    dt = 0.005 s; "-pid": diffrax's plain PIDController (before
+    NewtonLimitedController)."""
+    kw = {"step_control": "pid"} if name.endswith("-pid") else {}
+    solver = _solver(name, rtol, atol)
+    if isinstance(solver, str) and not js.SOLVERS[solver][1]:
+        kw["dt0"] = 0.005
+    return harness.jaxstring_code(
+        scene, solver, ts, label=name, max_steps=max_steps, **kw
     )
 
 
+def cvode_code(scene, ts):
+    """CVODE BDF (band solver) on the scene's JAX functions through callbacks."""
+    return harness.callback_code(
+        scene, "cvode-BDF", ts, label="CVODE BDF (band, JAX Jacobian)"
+    )
+
+
+def run_solver(scene, name, ts, rtol, atol, repeats, max_steps=400_000):
+    """One solver's row: a first call (compile), then the median of `repeats`."""
+    code = solver_code(scene, name, ts, rtol, atol, max_steps)
+    return harness.rows([harness.repeat(code, rtol, repeats)], NAMES, drop=())[0]
+
+
 def run_cvode(scene, ts, rtol, atol, repeats):
-    from references import JaxRHS, solve
-
-    rhs = JaxRHS(scene)
-    out = {}
-
-    def go():
-        out["r"] = solve(rhs, "cvode-BDF", ts, rtol, atol, jac="jax-band")
-        return out["r"]
-
-    tm, _ = common.timed_split(rhs.compile, go, repeats)
-    r = out["r"]
-    row = {
-        "solver": "CVODE BDF (band, JAX Jacobian)",
-        "ok": r["ok"],
-        "status": r["message"][:60],
-        "compile_s": tm.compile_s,
-        "run_s": tm.run_s,
-        "repeats": tm.n,
-        "steps": None,
-        "rejected": None,
-        "nfev": r["nfev"],
-        "njev": r["njev"],
-    }
-    row["end"] = np.asarray(rhs.end_mass(r["ys"])) if r["ok"] else None
-    return row
+    """CVODE's row: the callbacks' JIT compile apart, then the median of
+    `repeats` (no steps reported)."""
+    r = harness.repeat(cvode_code(scene, ts), rtol, repeats, first=False)
+    r["status"] = r["message"][:60]  # CVODE's own words
+    return harness.rows([r], NAMES, drop=())[0]
 
 
 def solver_block(EA, k, t1, names, rtol, atol, repeats, extra=None):
     """The default pendulum (displacement variables) at `EA`: CVODE (when
     installed) and each solver of `names` at one tolerance, plus `extra(scene, ts)`
     rows; returns (rows, the tight reference's end-mass path)."""
-    scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
+    case = harness.PendulumCase("displacement", EA=EA, k=k, t1=t1)
+    scene = case.scene()
     ts = jnp.linspace(0.0, t1, 201)
-    ref_end = common.tight_reference(scene, ts)
+    ref_end = harness.reference(
+        scene, ts, "rodas5p", 1e-10, max_steps=4_000_000, verbose=True
+    )[0]
     rows = []
     if importlib.util.find_spec("sksundae") is not None:
         rows.append(run_cvode(scene, ts, rtol, atol, repeats))
@@ -140,14 +135,7 @@ def component_costs(k, EA=1e6, reps=200):
     LU = jsl.lu_factor(Jd)
 
     def loop(body, x0):
-        f = jax.jit(lambda x: jax.lax.fori_loop(0, reps, lambda i, c: body(c), x))
-        jax.block_until_ready(f(x0))
-        best = math.inf
-        for _ in range(5):
-            t0 = time.perf_counter()
-            jax.block_until_ready(f(x0))
-            best = min(best, time.perf_counter() - t0)
-        return best / reps * 1e6
+        return harness.in_loop_us(lambda x, _: body(x), x0, n=reps, stat=min)
 
     def new_diag(d):
         m = _linalg.BlockTridiagonal(bt.lower, d, bt.upper, bt.n, bt.b, 1)

@@ -24,7 +24,6 @@ import argparse
 import json
 import subprocess
 import sys
-import time
 
 
 SOLVERS = ("rodas5p", "kvaerno5", "kvaerno3", "bdf")
@@ -32,6 +31,7 @@ SOLVERS = ("rodas5p", "kvaerno5", "kvaerno3", "bdf")
 
 def child(solver, mode, k):
     import jax
+    from harness import clock
 
     import jaxstring as js
     from jaxstring import _linalg
@@ -45,11 +45,12 @@ def child(solver, mode, k):
     jax.block_until_ready(warm.ys)
 
     def call(scene):
-        t = time.perf_counter()
-        c = time.process_time()
-        tr = js.simulate(scene, solver, rtol=1e-6, atol=1e-6)
-        jax.block_until_ready(tr.ys)
-        return time.perf_counter() - t, time.process_time() - c, tr
+        tr, wall, cpu = clock(
+            lambda: jax.block_until_ready(
+                js.simulate(scene, solver, rtol=1e-6, atol=1e-6)
+            )
+        )
+        return wall, cpu, tr
 
     first, first_cpu, tr = call(mk(1e6, 0.01))
     run, _, _ = call(mk(1e6, 0.01))

@@ -18,11 +18,12 @@ experiments/step_cost.py counts them.
 Run: ``python experiments/esdirk_step.py [--quick]``.
 """
 
+import math
 import tempfile
-import time
 
 import _common as common
 import diffrax as dfx
+import harness
 import jax
 import numpy as np
 from step_cost import _kernel_events
@@ -34,6 +35,10 @@ from jaxstring._solvers.stage_newton import StageNewton
 
 
 SCENES = (("angle", 1e6), ("angle", 1e9), ("natural", 1e9), ("displacement", 1e6))
+COLUMNS = (
+    "formulation EA tol solver ok err_m accepted attempts wall_s us_per_attempt "
+    "kernels_per_attempt compile_s"
+).split()
 
 
 def _solvers(form, tol):
@@ -68,39 +73,30 @@ def main(quick=False, tols=None, repeats=None):
     rows = []
     for form, EA in scenes:
         scene = jaxstring.scenes.string_pendulum(formulation=form, k=k, EA=EA, t1=t1)
-        ref = jaxstring.simulate(
-            scene, "rodas5p", rtol=1e-11, atol=1e-11, ts=ts, max_steps=10**6
-        )
+        ref, _ = harness.reference(scene, ts, "rodas5p", 1e-11, max_steps=10**6)
         for tol in tols:
             for label, solver in _solvers(form, tol).items():
-                run = lambda s=solver: common.block(
-                    jaxstring.simulate(
-                        scene, s, rtol=tol, atol=tol, ts=ts, max_steps=10**6
-                    )
+                code = harness.jaxstring_code(
+                    scene, solver, ts, label=label, max_steps=10**6
                 )
-                t0 = time.perf_counter()
-                traj = run()
-                first = time.perf_counter() - t0
-                best = np.inf
-                for _ in range(repeats):
-                    traj, wall, _ = common.clock(run)
-                    best = min(best, wall)
-                attempts = int(traj.stats["num_steps"])
+                # a first call (compile), then the best of `repeats`
+                rec = harness.repeat(code, tol, repeats, stat=min, long_run_s=math.inf)
+                attempts = rec["num_steps"]
                 row = dict(
                     formulation=form,
                     EA=EA,
                     tol=tol,
                     solver=label,
-                    ok=bool(traj.ok),
-                    err_m=common.end_mass_error(
-                        np.asarray(traj.end_mass)[1:], np.asarray(ref.end_mass)[1:]
+                    ok=rec["ok"],
+                    err_m=harness.end_mass_error(
+                        rec["end"][1:] if rec["ok"] else None, ref[1:]
                     ),
-                    accepted=int(traj.stats["num_accepted_steps"]),
+                    accepted=rec["accepted"],
                     attempts=attempts,
-                    wall_s=best,
-                    us_per_attempt=best / attempts * 1e6,
+                    wall_s=rec["wall_s"],
+                    us_per_attempt=rec["wall_s"] / attempts * 1e6,
                     kernels_per_attempt=_kernels(scene, solver, tol, t1 / 5),
-                    compile_s=max(first - best, 0.0),
+                    compile_s=rec["compile_s"],
                 )
                 rows.append(row)
                 print(row, flush=True)
@@ -133,7 +129,7 @@ def main(quick=False, tols=None, repeats=None):
     common.write_table(
         name,
         rows,
-        list(rows[0]),
+        COLUMNS,
         f"Kvaerno5 written out vs diffrax's Runge-Kutta loop (pendulum k = {k}, "
         f"{t1:g} s)",
         notes,

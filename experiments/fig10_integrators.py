@@ -5,8 +5,8 @@ paper's settings (k = 40, 2 s; fixed-step methods dt = 0.005 s = 400 steps;
 adaptive ones rtol = atol = 1e-7; Newton tolerance 1e-7)? Every jaxstring solver
 in ``jaxstring.SOLVERS`` runs (new ones appear automatically), next to the strongest
 peers: CVODE BDF with the band linear solver on an independent numba implementation
-of the same equations (experiments/peers.py), and scipy's Radau, BDF and LSODA on the
-same compiled functions; CVODE driving jaxstring's JAX functions through Python
+of the same equations (jaxstring/testing/peers.py), and scipy's Radau, BDF and LSODA
+on the same compiled functions; CVODE driving jaxstring's JAX functions through Python
 callbacks is a labelled second row (``--no_callback`` leaves it out). Each row has
 the end-mass error against CVODE-numba at rtol = atol = 1e-11, and a second table
 says where jaxstring's implicit time goes (Jacobians, LU, Newton).
@@ -15,16 +15,16 @@ Run: ``python experiments/fig10_integrators.py [--quick]``.
 """
 
 import math
-import time
+import statistics
 
 import _common as common
+import harness
 import jax
 import jax.numpy as jnp
 import numpy as np
-import peers
-import references
 
 import jaxstring
+from jaxstring.testing import references
 
 
 CVODE = "CVODE-numba"
@@ -41,55 +41,33 @@ IMPLICIT_STAGES = {
 }
 
 
-REF_TOL = 1e-11
+REF_TOL = harness.REF_TOL
+# The columns of this study's tables that have other names in a harness record.
+NAMES = {"code": "solver", "wall_s": "run_s", "accepted": "steps"}
 
 
-def peer_reference(peer, y0, ts, jac, tol=REF_TOL):
+def peer_reference(case, peer, ts, tol=REF_TOL):
     """End mass from CVODE-numba at rtol = atol = `tol`, and its label."""
-    out = peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac)
-    if not out["ok"]:
-        raise RuntimeError(f"reference failed: {out['message']}")
-    return peer.end_mass(out["ys"]), f"{CVODE} rtol=atol={tol:g}"
+    return harness.reference(case, ts, "cvode-numba", tol, peer=peer)
 
 
-def peer_codes(scene, peer, y0, ts, tol, jac, budget_s, callback=True):
-    """(label, kind, warm-up, call) for each peer on one scene: CVODE-numba, scipy's
-    Radau, BDF and LSODA on the same numba functions, and CVODE on jaxstring's JAX
-    functions through Python callbacks (the labelled second row). `call()` returns
-    a `peers.cvode_solve`-style dict and `end_mass` maps its states."""
-    tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
-    codes = [
-        (
-            f"{CVODE} [{tag}]",
-            "strong",
-            peer.warmup,
-            lambda: peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac),
-            peer.end_mass,
-        )
-    ]
+def peer_codes(scene, peer, y0, ts, budget_s, callback=True):
+    """The peers on one scene: CVODE-numba, scipy's Radau, BDF and LSODA on the
+    same numba functions, and CVODE on jaxstring's JAX functions through Python
+    callbacks (the labelled second row)."""
+    tag = "analytic band Jacobian" if peer.jac is not None else "band DQ Jacobian"
+    codes = [harness.cvode_numba_code(peer, ts, y0)]
     for method in ("Radau", "BDF", "LSODA"):
-        codes.append(
-            (
-                f"scipy-{method} numba [{tag}]",
-                "strong",
-                peer.warmup,
-                lambda m=method: peers.scipy_solve(
-                    peer, m, ts, y0, tol, tol, jac=jac, cpu_limit_s=budget_s
-                ),
-                peer.end_mass,
-            )
-        )
+        codes.append(harness.scipy_numba_code(
+            peer, method, ts, y0, label=f"scipy-{method} numba [{tag}]",
+            cpu_limit_s=budget_s,
+        ))  # fmt: skip
+    for code in codes:
+        code.kind = "strong"
     if callback and references.available()["cvode-BDF"]:
-        rhs = references.JaxRHS(scene)
-        codes.append(
-            (
-                f"{CALLBACK} [band Jacobian]",
-                "callback",
-                rhs.compile,
-                lambda: references.solve(rhs, "cvode-BDF", ts, tol, tol, "jax-band"),
-                rhs.end_mass,
-            )
-        )
+        codes.append(harness.callback_code(
+            scene, "cvode-BDF", ts, label=f"{CALLBACK} [band Jacobian]"
+        ))  # fmt: skip
     return codes
 
 
@@ -110,19 +88,12 @@ def _factorisations_per_attempt(name, scene):
 def _loop_time(fn, x, reps):
     """Median per-call time (us) of `fn(x)` inside one compiled loop."""
 
-    def body(i, c):
+    def body(c, _):
         out = fn(x.at[0].add(1e-30 * c))
         # reduce the whole output, so that no part of `fn` is dead code
         return c + 1e-30 * jnp.sum(jax.tree_util.tree_leaves(out)[0])
 
-    run = jax.jit(lambda: jax.lax.fori_loop(0, reps, body, jnp.zeros(())))
-    jax.block_until_ready(run())
-    ts = []
-    for _ in range(5):
-        t0 = time.perf_counter()
-        jax.block_until_ready(run())
-        ts.append(time.perf_counter() - t0)
-    return 1e6 * float(np.median(ts)) / reps
+    return harness.in_loop_us(body, jnp.zeros(()), n=reps, stat=statistics.median)
 
 
 def where_time_goes(scene, rows_js, peer_rows, quick=False):
@@ -239,54 +210,33 @@ def main(
     dead = set()  # configurations that failed or ran past the budget: skip higher EA
     last_scene = None
     for EA in EAs:
-        scene = jaxstring.scenes.string_pendulum(
-            formulation=formulation, k=k, EA=EA, t1=t1
-        )
+        case = harness.PendulumCase(formulation, EA=EA, k=k, t1=t1)
+        scene, peer = case.scene(), case.peer()
         last_scene = scene
-        peer = peers.make_rhs(formulation, k, EA, alpha=0.01)
-        jac = "analytic" if peer.jac is not None else "dq"
         y0 = np.ravel(np.asarray(scene.y0, dtype=np.float64))
         peer.warmup()
-        ref, ref_label = peer_reference(peer, y0, ts, jac)
+        ref, ref_label = peer_reference(case, peer, ts)
         for name in names:
             if name in dead:
                 rows.append(_skipped(EA, name))
                 continue
-            r = common.run_jaxstring(
-                scene,
-                name,
-                ts,
-                rtol=PAPER["tol"],
-                atol=PAPER["tol"],
-                newton_tol=PAPER["newton_tol"],
-                dt0=PAPER["dt"],
-                repeats=repeats,
-            )
-            r.update(
-                EA=EA,
-                kind="jaxstring",
-                err_m=common.end_mass_error(r.pop("end"), ref) if r["ok"] else math.nan,
-            )
+            kw = dict(newton_rtol=PAPER["newton_tol"], newton_atol=PAPER["newton_tol"])
+            if not jaxstring.SOLVERS[name][1]:
+                kw["dt0"] = PAPER["dt"]  # fixed step
+            code = harness.jaxstring_code(scene, name, ts, **kw)
+            # a first call (compile), then the median of `repeats`
+            rec = harness.repeat(code, PAPER["tol"], repeats)
+            (r,) = harness.rows(harness.score([rec], ref), NAMES)
+            r.update(EA=EA)
             _keep(r, (rows, js_rows), dead, budget_s)
-        codes = peer_codes(
-            scene, peer, y0, ts, PAPER["tol"], jac, budget_s, not no_callback
-        )
-        for label, kind, warmup, call, end_mass in codes:
-            if label in dead:
-                rows.append(_skipped(EA, label))
+        for code in peer_codes(scene, peer, y0, ts, budget_s, not no_callback):
+            if code.label in dead:
+                rows.append(_skipped(EA, code.label))
                 continue
-            tm, out = common.timed_split(warmup, call, repeats)
-            r = common.peer_result(out, end_mass)
-            end = r.pop("end")
-            r.update(
-                EA=EA,
-                solver=label,
-                kind=kind,
-                run_s=tm.run_s,
-                repeats=tm.n,
-                compile_s=tm.compile_s,
-                err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
-            )
+            # the warm-up (numba's compile, JAX's jit) apart, then the median
+            rec = harness.repeat(code, PAPER["tol"], repeats, first=False)
+            (r,) = harness.rows(harness.score([rec], ref), NAMES)
+            r.update(EA=EA)
             _keep(r, (rows, peer_rows), dead, budget_s)
     # Normalise like the paper: 1 = the fastest successful run at the smallest EA.
     base = min(
@@ -318,12 +268,13 @@ def main(
             f"err_m: max end-mass distance over {len(ts)} save times from {ref_label}"
             " (same variables).",
             f"{CVODE}: CVODE BDF (scikit-sundae), band linear solver, on the numba "
-            "right-hand side of experiments/peers.py (checked against jaxstring's "
-            "vector field in tests/test_peers.py); scipy-* numba: solve_ivp on the "
-            "same compiled function with the same Jacobian option; analytic band "
-            "Jacobian where the peer has one (displacement), else banded difference "
-            f"quotients. {CALLBACK}: CVODE driving jaxstring's own JAX functions "
-            "through Python callbacks, JAX band Jacobian (a second row, for scale).",
+            "right-hand side of jaxstring/testing/peers.py (checked against "
+            "jaxstring's vector field in tests/test_peers.py); scipy-* numba: "
+            "solve_ivp on the same compiled function with the same Jacobian option; "
+            "analytic band Jacobian where the peer has one (displacement), else "
+            f"banded difference quotients. {CALLBACK}: CVODE driving jaxstring's own "
+            "JAX functions through Python callbacks, JAX band Jacobian (a second row, "
+            "for scale).",
         ],
     )
     # Where the time goes (at the stiffest EA that ran).

@@ -4,10 +4,10 @@ Question: which set of variables -- displacement, natural (eps, t) or natural
 (eps, phi) -- is cheapest to integrate as the string gets stiffer (EA = 1e4 ... 1e9),
 with jaxstring's BDF, Kvaerno5 (the ESDIRK method of the paper's gap) and Rodas5P,
 and how far is each from CVODE as an expert sets it up? The peer is
-experiments/peers.py: the same equations in numba, CVODE BDF with the band linear
+jaxstring/testing/peers.py: the same equations in numba, CVODE BDF with the band linear
 solver and the analytic banded Jacobian (displacement variables) or CVODE's banded
 difference quotients (natural variables). IDA driving jaxstring's own JAX functions
-through Python callbacks (experiments/references.py, band Jacobian from JAX) is a
+through Python callbacks (jaxstring/testing/references.py, band Jacobian from JAX) is a
 second, labelled row (``--no_callback`` leaves it out).
 
 Settings: the paper's pendulum, k = 40, alpha = 0.01 s, released horizontal, 2 s,
@@ -25,11 +25,10 @@ Run: ``python experiments/fig9_formulations.py [--quick] [--solvers a,b]``.
 
 import math
 import os
-import statistics
 
 import _common as common
+import harness
 import numpy as np
-import peers
 
 import jaxstring
 
@@ -40,77 +39,20 @@ SOLVERS = ("bdf", "kvaerno5", "rodas5p")
 LABEL = {"displacement": "displacement", "natural": "(eps, t)", "angle": "(eps, phi)"}
 CVODE = "CVODE-numba"
 CALLBACK = "IDA on JAX callbacks"
-REF_TOL = 1e-11
+REF_TOL = harness.REF_TOL
 
 
-class Code:
-    """One contender on one scene: `call()` runs it once and returns a dict with
-    `ok`, `end` (end-mass positions at the save times, or None), `status` and
-    its counts; `compile_s` is filled in by `measure`."""
-
-    def __init__(self, label, kind, call, warmup=None):
-        self.label, self.kind, self.call, self.warmup = label, kind, call, warmup
-        self.first = None
-        self.walls, self.cpus = [], []
-
-
-def _jaxstring_code(scene, name, ts, tol):
-    def call():
-        return common.simulate_row(scene, name, ts, tol)
-
-    return Code(name, "jaxstring", call)
-
-
-def _cvode_code(peer, y0, ts, tol, jac):
-    def call():
-        out = peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac)
-        return common.peer_result(out, peer.end_mass)
-
-    tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
-    return Code(f"{CVODE} [{tag}]", "cvode", call, warmup=peer.warmup)
-
-
-def _callback_code(scene, ts, tol, max_fev):
-    import references
-
-    rhs = references.JaxRHS(scene, max_fev=max_fev)
-
-    def call():
-        out = references.solve(rhs, "ida", ts, tol, tol, "jax-band")
-        return common.peer_result(out, rhs.end_mass)
-
-    return Code(f"{CALLBACK} [band Jacobian]", "callback", call, warmup=rhs.compile)
-
-
-def measure(codes, repeats, long_run_s=common.LONG_RUN_S):
-    """Time every code: one first call each (compile, warm-up), then `repeats`
-    interleaved rounds. A code whose first timed run took longer than `long_run_s`
-    (wall) or failed is not repeated. Returns {label: result dict of its last run}
-    with `wall_s`, `cpu_s` (medians), `repeats` and `compile_s` added."""
-    results = {}
-    for code in codes:
-        warm = code.warmup() if code.warmup is not None else None
-        out, wall, _ = common.clock(code.call)
-        code.first = wall if warm is None else warm
-        results[code.label] = out
-    for i in range(max(repeats, 1)):
-        for code in codes:
-            if i > 0 and (not results[code.label]["ok"] or code.walls[0] > long_run_s):
-                continue
-            out, wall, cpu = common.clock(code.call)
-            code.walls.append(wall)
-            code.cpus.append(cpu)
-            results[code.label] = out
-    for code in codes:
-        r = results[code.label]
-        r["wall_s"] = statistics.median(code.walls)
-        r["cpu_s"] = statistics.median(code.cpus)
-        r["repeats"] = len(code.walls)
-        # jaxstring: first call minus the median run; the peers: their warm-up.
-        r["compile_s"] = (
-            max(code.first - r["wall_s"], 0.0) if code.warmup is None else code.first
-        )
-    return results
+def _codes(scene, peer, ts, names, callback):
+    """CVODE-numba, the jaxstring solvers `names` and (where `callback`) IDA on
+    jaxstring's JAX functions through callbacks, on one scene."""
+    y0 = np.ravel(np.asarray(scene.y0, dtype=np.float64))
+    codes = [harness.cvode_numba_code(peer, ts, y0)]
+    codes += [harness.jaxstring_code(scene, n, ts) for n in names]
+    if callback:
+        codes.append(harness.callback_code(
+            scene, "ida", ts, label=f"{CALLBACK} [band Jacobian]", max_fev=2_000_000
+        ))  # fmt: skip
+    return codes
 
 
 def main(
@@ -140,41 +82,23 @@ def main(
     for form in formulations:
         dead = set()
         for EA in EAs:
-            scene = jaxstring.scenes.string_pendulum(
-                formulation=form, k=k, EA=EA, t1=t1
-            )
-            peer = peers.make_rhs(form, k, EA, alpha=0.01)
-            jac = "analytic" if peer.jac is not None else "dq"
-            y0 = np.ravel(np.asarray(scene.y0, dtype=np.float64))
+            case = harness.PendulumCase(form, EA=EA, k=k, t1=t1)
+            scene, peer = case.scene(), case.peer()
             peer.warmup()
-            ref_out = peers.cvode_solve(peer, ts, y0, REF_TOL, REF_TOL, jac=jac)
-            if not ref_out["ok"]:
-                raise RuntimeError(f"reference failed: {ref_out['message']}")
-            ref = peer.end_mass(ref_out["ys"])
+            ref, _ = harness.reference(case, ts, "cvode-numba", REF_TOL, peer=peer)
             # The reference's own accuracy: its distance from a 10x looser run.
-            loose = peers.cvode_solve(peer, ts, y0, 10 * REF_TOL, 10 * REF_TOL, jac)
-            ref_diff = common.end_mass_error(peer.end_mass(loose["ys"]), ref)
+            loose, _ = harness.reference(case, ts, "cvode-numba", 10 * REF_TOL,
+                                         peer=peer)  # fmt: skip
+            ref_diff = common.end_mass_error(loose, ref)
             ref_checks.append(ref_diff)
-            codes = [_cvode_code(peer, y0, ts, tol, jac)]
-            codes += [
-                _jaxstring_code(scene, n, ts, tol) for n in names if n not in dead
-            ]
-            if not no_callback and form not in callback_dead:
-                codes.append(_callback_code(scene, ts, tol, max_fev=2_000_000))
+            live = [n for n in names if n not in dead]
+            callback = not no_callback and form not in callback_dead
+            codes = _codes(scene, peer, ts, live, callback)
             load = os.getloadavg()[0]
-            results = measure(codes, repeats)
-            for code in codes:
-                r = results[code.label]
-                end = r.pop("end")
-                r.update(
-                    formulation=form,
-                    EA=EA,
-                    solver=code.label,
-                    kind=code.kind,
-                    err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
-                    ref_diff_m=ref_diff,
-                    load_1min=load,
-                )
+            # every code once per round (medians), compile apart
+            records = harness.score(harness.interleaved(codes, tol, repeats), ref)
+            for code, r in zip(codes, harness.rows(records, {"code": "solver"})):
+                r.update(formulation=form, EA=EA, ref_diff_m=ref_diff, load_1min=load)
                 # A code that failed or ran past the budget sits out the stiffer EAs.
                 if not r["ok"] or r["cpu_s"] > budget_s:
                     if code.kind == "jaxstring":
@@ -208,14 +132,15 @@ def main(
             f"x_cvode_cpu, x_cvode_wall = time / {CVODE}'s at the same formulation "
             "and EA, measured in the same interleaved rounds.",
             f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
-            "numba right-hand side of experiments/peers.py; analytic banded "
+            "numba right-hand side of jaxstring/testing/peers.py; analytic banded "
             "Jacobian in displacement variables, CVODE's banded difference "
             "quotients in natural variables. "
             + (
                 "The callback IDA row was left out (--no_callback)."
                 if no_callback
                 else f"{CALLBACK}: IDA with the band Jacobian from JAX, jaxstring's "
-                "vector field through Python callbacks (experiments/references.py)."
+                "vector field through Python callbacks "
+                "(jaxstring/testing/references.py)."
             ),
             f"err_m: largest end-mass distance at the {len(ts)} save times from "
             f"{CVODE} at rtol = atol = {REF_TOL:g} in the same variables; "

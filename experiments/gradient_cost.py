@@ -12,7 +12,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import statistics
-import time
 
 import equinox as eqx
 import jax
@@ -22,7 +21,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from _common import results_dir, set_quick, stamp_markdown
+from _common import clock, results_file, savefig, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring import _fit
@@ -36,14 +35,8 @@ def loss_fn(traj, scene):
 
 
 def timed(f, repeats):
-    t = time.perf_counter()
-    jax.block_until_ready(f())
-    first = time.perf_counter() - t
-    runs = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        jax.block_until_ready(f())
-        runs.append(time.perf_counter() - t)
+    _, first, _ = clock(lambda: jax.block_until_ready(f()))
+    runs = [clock(lambda: jax.block_until_ready(f()))[1] for _ in range(repeats)]
     return first, statistics.median(runs)
 
 
@@ -103,11 +96,11 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
                 flush=True,
             )
     keys = list(rows[0])
-    with open(os.path.join(results_dir(), "gradient_cost.csv"), "w") as f:
+    with results_file("gradient_cost.csv") as f:
         f.write(",".join(keys) + "\n")
         for r in rows:
             f.write(",".join(str(r[k_]) for k_ in keys) + "\n")
-    with open(os.path.join(results_dir(), "gradient_cost.md"), "w") as f:
+    with results_file("gradient_cost.md") as f:
         f.write(
             "# Cost of a gradient relative to the forward solve\n\n"
             + stamp_markdown()
@@ -130,7 +123,7 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
     ax.set_ylabel("gradient time / forward time")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(results_dir(), "gradient_cost.png"), dpi=120)
+    savefig(fig, "gradient_cost", dpi=120, tight=False)
     return rows
 
 

@@ -51,7 +51,6 @@ if __name__ == "__main__":  # as a script only: importing it changes nothing
 
 import csv
 import math
-import time
 
 import _common as common
 import equinox as eqx
@@ -227,20 +226,24 @@ def _simulate_kw(solver, max_steps):
 def run_case(scene, solver, ts, metrics, max_steps, compile_s):
     """One timed solve of `scene` (already compiled); the row's outcome fields."""
     kw = _simulate_kw(solver, max_steps)
-    w, c = time.perf_counter(), time.process_time()
-    try:
-        traj = common.block(js.simulate(scene, solver, ts=ts, **kw))
-    except Exception as e:  # noqa: BLE001  (an exception is a result: bad)
+
+    def solve():
+        try:
+            return common.block(js.simulate(scene, solver, ts=ts, **kw)), None
+        except Exception as e:  # noqa: BLE001  (an exception is a result: bad)
+            return None, e
+
+    (traj, e), wall, cpu = common.clock(solve)
+    if e is not None:
         return dict(
             outcome="bad",
             status=f"{type(e).__name__}: {e}"[:200].replace("\n", " "),
             nan=False,
             compile_s=compile_s,
-            wall_s=time.perf_counter() - w,
-            cpu_s=time.process_time() - c,
+            wall_s=wall,
+            cpu_s=cpu,
             max_steps=max_steps,
         )
-    wall, cpu = time.perf_counter() - w, time.process_time() - c
     nan = nan_before_failure(traj)
     row = dict(
         outcome=outcome(traj, nan),
@@ -265,12 +268,14 @@ def warm_up(scene, solver, max_steps, n_save=N_SAVE):
     short = eqx.tree_at(lambda s: s.t1, scene, jnp.asarray(t0 + 0.01))
     kw = _simulate_kw(solver, max_steps)
     ts = jnp.linspace(t0, t0 + 0.01, n_save)
-    start = time.perf_counter()
-    try:
-        common.block(js.simulate(short, solver, ts=ts, **kw))
-    except Exception:  # noqa: BLE001  (the full run reports it)
-        pass
-    return time.perf_counter() - start
+
+    def solve():
+        try:
+            common.block(js.simulate(short, solver, ts=ts, **kw))
+        except Exception:  # noqa: BLE001  (the full run reports it)
+            pass
+
+    return common.clock(solve)[1]
 
 
 # --------------------------------------------------------------------------------------
@@ -421,7 +426,7 @@ class Appender:
         self.f = open(path, "a", newline="")
         if new:
             self.f.write(f"# Hard cases ({NAME})\n")
-        self.f.write(f"# run: {common.stamp_line()}\n")
+        self.f.write(f"# run: {common.stamp_line(f'{NAME}.csv')}\n")
         self.w = csv.DictWriter(self.f, fieldnames=COLUMNS, extrasaction="ignore")
         if new:
             self.w.writeheader()
@@ -697,7 +702,7 @@ def report(path, max_steps):
         "",
     ]
     text = "\n".join(lines)
-    (common.results_dir() / f"{NAME}.md").write_text(text)
+    common.write_text(f"{NAME}.md", text)
     print(text)
     figure(rows)
     return c

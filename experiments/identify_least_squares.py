@@ -25,7 +25,6 @@ identify_least_squares_adam.{md,csv}).
 import argparse
 import os
 import sys
-import time
 
 import _common as common
 import jax.numpy as jnp
@@ -52,19 +51,20 @@ def fit(data, ts):
     start = js.pendulum.string_pendulum(
         "displacement", k=K, EA=START["EA"], alpha=START["alpha"], t1=T1
     )
-    t0 = time.perf_counter()
-    res = js.least_squares(
-        start,
-        js.Misfit(jnp.asarray(data)),
-        ["alpha", "EA"],
-        ts=ts,
-        rtol=1e-6,
-        atol=1e-6,
-        # LM stops when log p changes by less than 1e-5 between steps: a
-        # thousandth of the noise's standard deviation of the estimates.
-        tol=1e-5,
+    res, wall, _ = common.clock(
+        lambda: js.least_squares(
+            start,
+            js.Misfit(jnp.asarray(data)),
+            ["alpha", "EA"],
+            ts=ts,
+            rtol=1e-6,
+            atol=1e-6,
+            # LM stops when log p changes by less than 1e-5 between steps: a
+            # thousandth of the noise's standard deviation of the estimates.
+            tol=1e-5,
+        )
     )
-    return res, time.perf_counter() - t0
+    return res, wall
 
 
 def adam_comparison(ts, steps=300):
@@ -88,19 +88,21 @@ def adam_comparison(ts, steps=300):
             reached["step"] = step + 1
             raise StopIteration
 
-    t0 = time.perf_counter()
-    try:
-        js.fit(
-            start, loss, ["alpha", "EA"], steps=steps, learning_rate=0.05, ts=ts,
-            rtol=1e-6, atol=1e-6, print_every=None, callback=callback,
-        )  # fmt: skip
-    except StopIteration:
-        pass
+    def run():
+        try:
+            js.fit(
+                start, loss, ["alpha", "EA"], steps=steps, learning_rate=0.05, ts=ts,
+                rtol=1e-6, atol=1e-6, print_every=None, callback=callback,
+            )  # fmt: skip
+        except StopIteration:
+            pass
+
+    _, adam_wall, _ = common.clock(run)
     n = reached.get("step")
     row = dict(
         adam_steps=n if n is not None else f"> {steps}",
         adam_solves=2 * n if n is not None else f"> {2 * steps}",
-        adam_wall_s=time.perf_counter() - t0,
+        adam_wall_s=adam_wall,
         lm_iterations=ls.iterations,
         lm_solves=ls.solves,
         lm_wall_s=ls_wall,

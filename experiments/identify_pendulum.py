@@ -35,7 +35,7 @@ import optax
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from _common import results_dir, set_quick, stamp_markdown
+from _common import results_file, savefig, set_quick, stamp_markdown
 
 import jaxstring as js
 from jaxstring import _fit
@@ -127,11 +127,11 @@ def main(
         )
     tag = "_quick" if quick else ""
     keys = list(rows[0])
-    with open(os.path.join(results_dir(), f"identify_pendulum{tag}.csv"), "w") as f:
+    with results_file(f"identify_pendulum{tag}.csv") as f:
         f.write(",".join(keys) + "\n")
         for r in rows:
             f.write(",".join(str(r[k_]) for k_ in keys) + "\n")
-    with open(os.path.join(results_dir(), f"identify_pendulum{tag}.md"), "w") as f:
+    with results_file(f"identify_pendulum{tag}.md") as f:
         f.write(
             "# Identification of alpha (and EA) from a bouncing string pendulum\n\n"
             + stamp_markdown()
@@ -164,7 +164,7 @@ def main(
     axes[1].set_ylabel("chi^2 per residual")
     axes[1].legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(results_dir(), f"identify_pendulum{tag}.png"), dpi=120)
+    savefig(fig, f"identify_pendulum{tag}", dpi=120, tight=False)
     return rows
 
 

@@ -25,7 +25,6 @@ Writes results/identify_tandem.{md,csv,png}.
 """
 
 import argparse
-import time
 
 import _common as common
 import equinox as eqx
@@ -78,21 +77,21 @@ def main(quick=False):
         data = clean + NOISE_DEG * np.random.default_rng(seed).standard_normal(
             clean.shape
         )
-        t0 = time.perf_counter()
-        res = js.least_squares(
-            start,
-            HeadingResidual(jnp.asarray(data)),
-            list(PARAMS),
-            ts=ts,
-            solver="tsit5",
-            rtol=1e-8,
-            atol=1e-8,
-            tol=1e-5,
-            max_steps=100_000,
+        res, wall, _ = common.clock(
+            lambda: js.least_squares(
+                start,
+                HeadingResidual(jnp.asarray(data)),
+                list(PARAMS),
+                ts=ts,
+                solver="tsit5",
+                rtol=1e-8,
+                atol=1e-8,
+                tol=1e-5,
+                max_steps=100_000,
+            )
         )
-        wall = time.perf_counter() - t0
-        truth = dict(zip(("C_Y1", "C_Y2"), zip(PARAMS, true_vals)))
-        rows.append(common.fit_row(seed, res, wall, truth, "sigma_deg"))
+        true_of = dict(zip(("C_Y1", "C_Y2"), zip(PARAMS, true_vals)))
+        rows.append(common.fit_row(seed, res, wall, true_of, "sigma_deg"))
     c1 = np.array([r["C_Y1"] for r in rows])
     c2 = np.array([r["C_Y2"] for r in rows])
     later = float(np.median([r["wall_s"] for r in rows[1:]]))

@@ -47,7 +47,6 @@ import os
 import re
 import shutil
 import tempfile
-import time
 
 import _common as common
 import jax
@@ -111,10 +110,13 @@ def run_moordyn_chain(path, motion, n_lines=1):
     import moordyn
 
     with common.quiet_fd():
-        t0 = time.perf_counter()
-        system = moordyn.Create(path)
-        moordyn.Init(system, list(motion[0, 1:4]), [0.0] * 3)
-        init_s = time.perf_counter() - t0
+
+        def start():
+            system = moordyn.Create(path)
+            moordyn.Init(system, list(motion[0, 1:4]), [0.0] * 3)
+            return system
+
+        system, init_s, _ = common.clock(start)
         line = moordyn.GetLine(system, 1)
         N = moordyn.GetLineNumberNodes(line) - 1
 
@@ -130,10 +132,12 @@ def run_moordyn_chain(path, motion, n_lines=1):
             for i in range(len(motion) - 1):
                 x = motion[i, 1:4]
                 dx = (motion[i + 1, 1:4] - x) / DT
-                w, c = time.perf_counter(), time.process_time()
-                moordyn.Step(system, list(x), list(dx), motion[i, 0] - motion[0, 0], DT)
-                wall += time.perf_counter() - w
-                cpu += time.process_time() - c
+                t = motion[i, 0] - motion[0, 0]
+                _, w, c = common.clock(
+                    lambda: moordyn.Step(system, list(x), list(dx), t, DT)
+                )
+                wall += w
+                cpu += c
                 out.append(tens())
         except Exception:
             ok = False
@@ -240,9 +244,9 @@ def chain_case(case, rows, series, quick, repeats, workdir):
     settings = CHAIN_SETTINGS[:3] if quick else CHAIN_SETTINGS
     for label, ramp, area, refine in settings:
         motion = ramped(table) if ramp else table
-        t0 = time.perf_counter()
-        scene = chain_scene(case, motion, t_end, area, refine)
-        static_s = time.perf_counter() - t0
+        scene, static_s, _ = common.clock(
+            lambda: chain_scene(case, motion, t_end, area, refine)
+        )
         st = lines.static_tensions(scene)[1]
         static = (st[1], st[0])  # (fairlead, anchor)
         js_runs = []
@@ -321,17 +325,16 @@ def pendulum_case(rows, repeats, workdir):
     path = lines.case_path("pendulum.txt")
     md_path = _deck_copy(workdir, "pendulum.txt")  # MoorDyn writes beside it
     with common.quiet_fd():
-        t0 = time.perf_counter()
-        system = moordyn.Create(md_path)
-        moordyn.Init(system, [], [])
-        init_s = time.perf_counter() - t0
+        system, init_s = common.moordyn_start(md_path)
         pt = moordyn.GetPoint(system, 2)
         xs = [moordyn.GetPointPos(pt)[0]]
-        w, c = time.perf_counter(), time.process_time()
-        for a, b in zip(ts[:-1], ts[1:]):
-            moordyn.Step(system, [], [], float(a), float(b - a))
-            xs.append(moordyn.GetPointPos(pt)[0])
-        md_run, md_cpu = time.perf_counter() - w, time.process_time() - c
+
+        def steps():
+            for a, b in zip(ts[:-1], ts[1:]):
+                moordyn.Step(system, [], [], float(a), float(b - a))
+                xs.append(moordyn.GetPointPos(pt)[0])
+
+        _, md_run, md_cpu = common.clock(steps)
         dtM = _md_dt(system)
         moordyn.Close(system)
     x_md = np.asarray(xs)
@@ -379,12 +382,14 @@ def lifting_case(rows, repeats, workdir):
         pt = moordyn.GetPoint(system, 2)
         moordyn.SetLineUnstretchedLengthVel(line, -1.0)
         dev = []
-        w, c = time.perf_counter(), time.process_time()
-        for a in ts[:-1]:
-            moordyn.Step(system, [], [], float(a), DT)
-            L = moordyn.GetLineUnstretchedLength(line)
-            dev.append(abs(L + moordyn.GetPointPos(pt)[2]))
-        md_run, md_cpu = time.perf_counter() - w, time.process_time() - c
+
+        def steps():
+            for a in ts[:-1]:
+                moordyn.Step(system, [], [], float(a), DT)
+                L = moordyn.GetLineUnstretchedLength(line)
+                dev.append(abs(L + moordyn.GetPointPos(pt)[2]))
+
+        _, md_run, md_cpu = common.clock(steps)
         moordyn.Close(system)
     md_dev = float(np.max(np.asarray(dev)[ts[1:] >= 1.0]))
     scene = lines.read_moordyn(path, t1=10.0)
@@ -425,26 +430,31 @@ def hywind_case(rows, series, quick, repeats, workdir):
     deck = lines.parse_moordyn(path)
     fair0 = np.array([p["position"] for p in deck.points if p["kind"] == "coupled"])
     with common.quiet_fd():
-        t0 = time.perf_counter()
-        system = moordyn.Create(_deck_copy(workdir, "lines.txt"))
-        moordyn.Init(system, list(fair0.reshape(-1)), [0.0] * 9)
-        init_s = time.perf_counter() - t0
+
+        def start():
+            system = moordyn.Create(_deck_copy(workdir, "lines.txt"))
+            moordyn.Init(system, list(fair0.reshape(-1)), [0.0] * 9)
+            return system
+
+        system, init_s, _ = common.clock(start)
         lns = [moordyn.GetLine(system, k) for k in (1, 2, 3)]
         N = moordyn.GetLineNumberNodes(lns[0]) - 1
         md = [[np.linalg.norm(moordyn.GetLineNodeTen(ln, N)) for ln in lns]]
-        w, c = time.perf_counter(), time.process_time()
-        for i in range(len(tt) - 1):
-            x = (fair0 + off[i]).reshape(-1)
-            dx = np.tile((off[i + 1] - off[i]) / DT, 3)
-            moordyn.Step(system, list(x), list(dx), float(tt[i]), DT)
-            md.append([np.linalg.norm(moordyn.GetLineNodeTen(ln, N)) for ln in lns])
-        md_run, md_cpu = time.perf_counter() - w, time.process_time() - c
+
+        def steps():
+            for i in range(len(tt) - 1):
+                x = (fair0 + off[i]).reshape(-1)
+                dx = np.tile((off[i + 1] - off[i]) / DT, 3)
+                moordyn.Step(system, list(x), list(dx), float(tt[i]), DT)
+                md.append([np.linalg.norm(moordyn.GetLineNodeTen(ln, N)) for ln in lns])
+
+        _, md_run, md_cpu = common.clock(steps)
         dtM = _md_dt(system)
         moordyn.Close(system)
     md = np.asarray(md)
-    t0 = time.perf_counter()
-    scene = lines.deck_scene(deck, motion=(tt, off), t1=float(tt[-1]))
-    setup = time.perf_counter() - t0
+    scene, setup, _ = common.clock(
+        lambda: lines.deck_scene(deck, motion=(tt, off), t1=float(tt[-1]))
+    )
     traj, comp, run, cpu = jaxstring_timed(scene, jnp.asarray(tt), 1e-4, repeats)
     fj = np.asarray(traj.obs["tension_b"])
     amp = np.max(np.abs(md - md[0]), axis=0)
@@ -533,9 +543,9 @@ def gradient_study(quick):
         return jnp.max(tr.obs["tension_b"][:, 0])
 
     p0 = jnp.array([1.674e9, 1.37, 1.0e5])
-    t = time.perf_counter()
-    grad = np.asarray(jax.jit(jax.jacfwd(max_tension))(p0))
-    ad_s = time.perf_counter() - t
+    grad, ad_s, _ = common.clock(
+        lambda: np.asarray(jax.jit(jax.jacfwd(max_tension))(p0))
+    )
     f = jax.jit(max_tension)
     rows = []
     for i, name in enumerate(("EA (N)", "Cd (-)", "kBot (Pa/m)")):
@@ -597,15 +607,18 @@ def identify_study(quick):
 
     rj = jax.jit(lambda p: (r(p), jax.jacfwd(r)(p)))
     p = jnp.log(jnp.array([1.0, 1.2e9]))
-    start = time.perf_counter()
-    for it in range(30):
-        res, J = rj(p)
-        A, g = J.T @ J, J.T @ res
-        dp = -jnp.linalg.solve(A + 1e-3 * jnp.diag(jnp.diag(A)), g)
-        p = p + dp
-        if float(jnp.max(jnp.abs(dp))) < 1e-6:
-            break
-    wall = time.perf_counter() - start
+
+    def levenberg_marquardt(p):
+        for it in range(30):
+            res, J = rj(p)
+            A, g = J.T @ J, J.T @ res
+            dp = -jnp.linalg.solve(A + 1e-3 * jnp.diag(jnp.diag(A)), g)
+            p = p + dp
+            if float(jnp.max(jnp.abs(dp))) < 1e-6:
+                break
+        return p, it, res, A
+
+    (p, it, res, A), wall, _ = common.clock(lambda: levenberg_marquardt(p))
     cost = float(res @ res)
     std = np.sqrt(np.diag(np.linalg.inv(np.asarray(A)) * cost / (len(ts) - 2)))
     fit = np.exp(np.asarray(p))

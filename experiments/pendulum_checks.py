@@ -27,7 +27,7 @@ from tests.test_physics import HARD_CASES, G, _axial_mode_scene  # noqa: E402
 
 
 def main(quick: bool = False) -> str:
-    from _common import results_dir, set_quick, stamp_markdown
+    from _common import set_quick, stamp_markdown, write_text
 
     set_quick(quick)
     rows = []
@@ -117,9 +117,7 @@ def main(quick: bool = False) -> str:
         "|---|---|---|",
     ] + [f"| {a} | {b} | {c} |" for a, b, c in rows]
     text = "\n".join(lines) + "\n"
-    out = results_dir() / ("pendulum_checks" + ("_quick" if quick else "") + ".md")
-    with open(out, "w") as fh:
-        fh.write(text)
+    write_text("pendulum_checks" + ("_quick" if quick else "") + ".md", text)
     print(text)
     return text
 

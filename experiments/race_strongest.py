@@ -1,12 +1,12 @@
 """The race against the strongest peers: time to reach an end-mass error target.
 
 Question: at equal error, how long does jaxstring take against CVODE as an expert
-sets it up? The peer is experiments/peers.py: the same equations in numba, CVODE BDF
-with the band linear solver and the analytic banded Jacobian (displacement
+sets it up? The peer is jaxstring/testing/peers.py: the same equations in numba,
+CVODE BDF with the band linear solver and the analytic banded Jacobian (displacement
 variables) or CVODE's banded difference quotients (natural variables), and scipy's
 BDF, Radau and LSODA on the same compiled functions. CVODE driving jaxstring's own
-JAX functions through Python callbacks (experiments/references.py, band Jacobian from
-JAX) is a second, labelled row.
+JAX functions through Python callbacks (jaxstring/testing/references.py, band
+Jacobian from JAX) is a second, labelled row.
 
 Scene: the paper's pendulum (k = 40, alpha = 0.01 s, released horizontal, 2 s), EA =
 1e6 and 1e9, displacement and (eps, phi) variables (`--formulations` adds natural
@@ -27,6 +27,11 @@ Kvaerno5 and BDF at rtol = atol = 1e-3 ... 1e-10 in each pendulum formulation (E
 1e6 and 1e9) and on the tether, and picks per system the fastest that reaches each
 preset's error (race_strongest_presets.{md,csv}).
 
+A full ``--presets`` run also writes its choice into jaxstring/presets.json
+(one solver per system: the one fastest for most presets, each preset at its
+cheapest tolerance that reaches the target); ``--preset-table`` rebuilds that file
+from the results files race_strongest_presets{,_tandem}.csv without measuring.
+
 ``--merge a,b,...`` writes one report (race_strongest.*) from parts run as separate
 processes (``--name a`` ...), e.g. one scene each.
 
@@ -36,10 +41,11 @@ Run: ``python experiments/race_strongest.py [--quick] [--presets]``.
 import itertools
 import math
 import os
+import pathlib
 
 import _common as common
+import harness
 import numpy as np
-import peers
 
 import jaxstring
 
@@ -50,101 +56,35 @@ TARGETS = (1e-3, 1e-4, 1e-5, 1e-6)
 TOLS = tuple(10.0 ** (-e / 2) for e in range(4, 21))  # 1e-2 ... 1e-10
 SOLVERS = ("bdf", "kvaerno5", "rodas5p")
 SCIPY = ("BDF", "Radau", "LSODA")
-REF_TOL = 1e-11
+REF_TOL = harness.REF_TOL
 CVODE = "CVODE-numba"
 LABELS = {"displacement": "displacement", "natural": "(eps, t)", "angle": "(eps, phi)"}
 
 
-class Code:
-    """One contender: `run(tol)` returns end-mass positions at the save times (or
-    None on failure) and, after `prepare()`, needs no compilation."""
-
-    def __init__(self, label, kind, run, prepare):
-        self.label, self.kind, self._run, self._prepare = label, kind, run, prepare
-        self.compile_s = math.nan
-
-    def prepare(self, tol):
-        self.compile_s = self._prepare(tol)
-
-    def run(self, tol):
-        return self._run(tol)
-
-
 def _codes(scene, peer, ts, solvers, scipy_methods, callback, budget_s, numba_s):
-    """The contenders on one scene, CVODE-numba first."""
+    """The contenders on one scene, CVODE-numba first (the numba codes' compile:
+    `numba_s`, the peer's one warm-up)."""
     y0 = np.ravel(np.asarray(scene.y0, dtype=np.float64))
-    jac = "analytic" if peer.jac is not None else "dq"
+    jac = harness.peer_jacobian(peer)
     tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
-
-    def peer_run(solve):
-        def run(tol):
-            out = solve(tol)
-            return peer.end_mass(out["ys"]) if out["ok"] else None
-
-        return run
-
-    codes = [
-        Code(
-            f"{CVODE} [{tag}]",
-            "cvode",
-            peer_run(lambda tol: peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac)),
-            lambda tol: numba_s,
-        )
-    ]
+    numba = lambda: numba_s
+    codes = [harness.cvode_numba_code(peer, ts, y0, warmup=numba)]
     if jac == "analytic":
-        codes.append(
-            Code(
-                f"{CVODE} [band DQ Jacobian]",
-                "cvode-dq",
-                peer_run(lambda tol: peers.cvode_solve(peer, ts, y0, tol, tol, "dq")),
-                lambda tol: numba_s,
-            )
-        )
+        code = harness.cvode_numba_code(peer, ts, y0, jac="dq", warmup=numba)
+        code.kind = "cvode-dq"
+        codes.append(code)
     for name in solvers:
-
-        def js_run(tol, name=name):
-            traj = jaxstring.simulate(
-                scene, name, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
-            )
-            common.block(traj)
-            return np.asarray(traj.end_mass) if traj.ok else None
-
-        def js_prepare(tol, run=js_run):
-            _, first, _ = common.clock(lambda: run(tol))
-            _, again, _ = common.clock(lambda: run(tol))
-            return max(first - again, 0.0)
-
-        codes.append(Code(f"jaxstring {name}", "jaxstring", js_run, js_prepare))
+        codes.append(harness.jaxstring_code(scene, name, ts, label=f"jaxstring {name}"))
     for method in scipy_methods:
-        codes.append(
-            Code(
-                f"scipy {method} [numba, {tag}]",
-                "scipy",
-                peer_run(
-                    lambda tol, m=method: peers.scipy_solve(
-                        peer, m, ts, y0, tol, tol, jac=jac, cpu_limit_s=budget_s
-                    )
-                ),
-                lambda tol: numba_s,
-            )
-        )
+        codes.append(harness.scipy_numba_code(
+            peer, method, ts, y0, label=f"scipy {method} [numba, {tag}]",
+            cpu_limit_s=budget_s, warmup=numba,
+        ))  # fmt: skip
     if callback:
-        import references
-
-        rhs = references.JaxRHS(scene, max_fev=int(2e5 * budget_s))
-
-        def cb_run(tol):
-            out = references.solve(rhs, "cvode-BDF", ts, tol, tol, "jax-band")
-            return rhs.end_mass(out["ys"]) if out["ok"] else None
-
-        codes.append(
-            Code(
-                "CVODE [JAX callbacks, band Jacobian]",
-                "callback",
-                cb_run,
-                lambda tol: rhs.compile(),
-            )
-        )
+        codes.append(harness.callback_code(
+            scene, "cvode-BDF", ts, label="CVODE [JAX callbacks, band Jacobian]",
+            max_fev=int(2e5 * budget_s),
+        ))  # fmt: skip
     return codes
 
 
@@ -164,60 +104,44 @@ def race_scene(
 ):
     """Race every code on one scene; return its rows (one per code and tolerance:
     error, minimum wall and CPU over the repeats, compile time)."""
-    scene = jaxstring.scenes.string_pendulum(formulation=form, k=k, EA=EA, t1=t1)
-    peer = peers.make_rhs(form, k, EA, alpha=0.01)
+    case = harness.PendulumCase(form, EA=EA, k=k, t1=t1)
+    scene, peer = case.scene(), case.peer()
     ts = np.linspace(0.0, t1, 5)
     numba_s = peer.warmup()  # numba's compile, or its cache load
-    ref_out = peers.cvode_solve(
-        peer,
-        ts,
-        np.ravel(np.asarray(scene.y0)),
-        REF_TOL,
-        REF_TOL,
-        jac="analytic" if peer.jac is not None else "dq",
-    )
-    if not ref_out["ok"]:
-        raise RuntimeError(f"reference failed: {ref_out['message']}")
-    ref = peer.end_mass(ref_out["ys"])
+    ref, _ = harness.reference(case, ts, "cvode-numba", REF_TOL, peer=peer)
     codes = _codes(scene, peer, ts, solvers, scipy_methods, callback, budget_s, numba_s)
     load = os.getloadavg()[0]
     rows = []
     for code in codes:
-        code.prepare(tols[0])
         reached = 0
-        for tol in tols:
-            end, wall, cpu = common.clock(lambda: code.run(tol))
-            err = (
-                common.end_mass_error(end[1:], ref[1:]) if end is not None else math.nan
-            )
-            row = dict(
-                formulation=form, EA=EA, code=code.label, kind=code.kind, tol=tol,
-                ok=end is not None, err_m=err, wall_s=wall, cpu_s=cpu,
-                compile_s=code.compile_s, repeats=1,
-            )  # fmt: skip
-            rows.append(row)
+
+        def keep_going(r):
+            nonlocal reached
             print(
-                f"{form} EA={EA:g} {code.label:44s} tol={tol:.1e} "
-                f"err={err:.2e} wall={wall:.3f}s cpu={cpu:.3f}s",
+                f"{form} EA={EA:g} {code.label:44s} tol={r['tol']:.1e} "
+                f"err={r['err_m']:.2e} wall={r['wall_s']:.3f}s cpu={r['cpu_s']:.3f}s",
                 flush=True,
             )
             # CPU, not wall: on a shared machine the wall time says little. A
             # failure at a loose tolerance (too large a step for the Newton
             # iteration) may pass at a tighter one: only a costly run stops.
-            if cpu > budget_s:
-                break
-            reached = reached + 1 if err <= min(targets) else reached
-            if reached >= 2:  # past the tightest target: tighter runs only cost more
-                break
+            if r["cpu_s"] > budget_s:
+                return False
+            reached = reached + 1 if r["err_m"] <= min(targets) else reached
+            # past the tightest target: tighter runs only cost more
+            return reached < 2
+
+        compile_s = harness.compile_seconds(code, tols[0])
+        rows += harness.sweep(code, tols, ref, keep_going, compile_s=compile_s,
+                              case={"formulation": form, "EA": EA})  # fmt: skip
     by_label = {c.label: c for c in codes}
-    for _ in range(max(repeats - 1, 0)):
-        for row in _candidates(rows, targets):
-            code = by_label[row["code"]]
-            _, wall, cpu = common.clock(lambda: code.run(row["tol"]))
-            row["wall_s"] = min(row["wall_s"], wall)
-            row["cpu_s"] = min(row["cpu_s"], cpu)
-            row["repeats"] += 1
+    harness.retime(
+        lambda: [(r, by_label[r["code"]]) for r in _candidates(rows, targets)],
+        max(repeats - 1, 0),
+        combine="min",
+    )
     for row in rows:
+        row.pop("end", None)
         row["load_start"] = load
         row["load_end"] = os.getloadavg()[0]
     return rows
@@ -375,7 +299,7 @@ def report(rows, name, forms, EAs, targets, solvers, repeats, k, t1, notes=()):
 
 def _read_rows(path):
     """Rows of a race CSV (a code label may hold one unquoted comma)."""
-    lines = path.read_text().splitlines()
+    lines = [x for x in path.read_text().splitlines() if not x.startswith("#")]
     head = lines[0].split(",")
     rows = []
     for line in lines[1:]:
@@ -422,32 +346,21 @@ def _js_curve(scene, solver, ts, ref, system, EA, tols, rows):
     """Error and time of one jaxstring solver over `tols` (loose to tight) until it
     is below the tightest preset target twice; rows appended to `rows`."""
     below = 0
-    for i, tol in enumerate(tols):
 
-        def run(tol=tol):
-            traj = jaxstring.simulate(
-                scene, solver, rtol=tol, atol=tol, ts=ts, max_steps=common.MAX_STEPS
-            )
-            return common.block(traj)
+    def keep_going(r):
+        nonlocal below
+        print(f"presets {system} EA={EA:g} {solver} tol={r['tol']:g} "
+              f"err={r['err_m']:.2e} wall={r['wall_s']:.3f}s cpu={r['cpu_s']:.3f}s",
+              flush=True)  # fmt: skip
+        if not r["ok"]:
+            return False
+        below = below + 1 if r["err_m"] <= min(PRESET_TARGETS.values()) else below
+        return below < 2
 
-        first = None
-        if i == 0:
-            _, first, _ = common.clock(run)
-        traj, wall, cpu = common.clock(run)
-        end = np.asarray(traj.end_mass) if traj.ok else None
-        err = common.end_mass_error(end[1:], ref[1:]) if end is not None else math.nan
-        rows.append(
-            dict(system=system, EA=EA, solver=solver, tol=tol, ok=traj.ok, err_m=err,
-                 wall_s=wall, cpu_s=cpu, steps=int(traj.stats["num_steps"]),
-                 compile_s=None if first is None else max(first - wall, 0.0))
-        )  # fmt: skip
-        print(f"presets {system} EA={EA:g} {solver} tol={tol:g} err={err:.2e} "
-              f"wall={wall:.3f}s cpu={cpu:.3f}s", flush=True)  # fmt: skip
-        if not traj.ok:
-            break
-        below = below + 1 if err <= min(PRESET_TARGETS.values()) else below
-        if below >= 2:
-            break
+    code = harness.jaxstring_code(scene, solver, ts)
+    records = harness.sweep(code, tols, ref, keep_going,
+                            case={"system": system, "EA": EA})  # fmt: skip
+    rows += harness.rows(records, {"code": "solver", "num_steps": "steps"})
 
 
 def pick_presets(rows):
@@ -473,6 +386,99 @@ def pick_presets(rows):
     return out
 
 
+# The machine-readable preset table (package data, read by
+# jaxstring/_presets.py); its systems: the pendulum's formulations,
+# "tether", and "other" (measured on the tandem).
+PRESET_TABLE = pathlib.Path(jaxstring.__file__).parent / "presets.json"
+TABLE_SYSTEM = {"tandem": "other"}
+
+
+def table_picks(rows):
+    """The preset table's choice per (system, preset): one solver per system, the
+    one that is fastest for most of its presets (`pick_presets`), each preset at
+    that solver's cheapest tolerance that reaches the target in every case (the
+    fastest pick where that solver reaches none). Values as `pick_presets`."""
+    picks = pick_presets(rows)
+    out = {}
+    for system in dict.fromkeys(r["system"] for r in rows):
+        won = [b[1][0] for (s, _), b in picks.items() if s == system and b]
+        if not won:
+            continue
+        solver = max(dict.fromkeys(won), key=won.count)
+        mine = pick_presets([r for r in rows if r["system"] == system
+                             and r["solver"] == solver])  # fmt: skip
+        for preset in PRESET_TARGETS:
+            out[(system, preset)] = mine[(system, preset)] or picks[(system, preset)]
+    return out
+
+
+def preset_entry(best) -> dict:
+    """One table entry from a pick: solver, rtol = atol, and the error (m) and
+    CPU time (s) of each measured case, rounded as the presets quote them."""
+    _, (solver, tol), hit = best
+    return {
+        "solver": solver,
+        "rtol": tol,
+        "atol": tol,
+        "error_m": [float(f"{r['err_m']:.1e}") for r in hit],
+        "cpu_s": [round(r["cpu_s"], 2) for r in hit],
+    }
+
+
+def write_preset_table(entries, source, path=PRESET_TABLE):
+    """Update the preset table at `path` with `entries` ({(system, preset): entry})
+    measured in results file `source` (a path under experiments/results/): their
+    entries, each system's source and that file's stamp, and the table's own
+    stamp (date, machine, commit, command of this write)."""
+    import json
+
+    import stamps
+
+    data = json.loads(path.read_text()) if path.exists() else {}
+    data.setdefault("description", (
+        "Accuracy presets of jaxstring.simulate(accuracy=...): for each preset "
+        "(end-mass error target) and system, the solver and rtol = atol chosen "
+        "from measurements, with the error (m) and CPU time (s) of each measured "
+        "case. Written by experiments/race_strongest.py --presets; read by "
+        "jaxstring/_presets.py."
+    ))  # fmt: skip
+    data["targets_m"] = dict(PRESET_TARGETS)
+    presets = data.setdefault("presets", {})
+    sources = data.setdefault("sources", {})
+    measured = stamps.format_stamp(stamps.read_stamp(stamps.ROOT / source))
+    for (system, preset), entry in entries.items():
+        presets.setdefault(preset, {})[system] = entry
+        sources[system] = {"results": source, "stamp": measured}
+    fields = stamps.stamp_fields()
+    data["stamp"] = {k: fields[k] for k in ("date", "machine", "commit", "command")}
+    order = ("description", "targets_m", "stamp", "sources", "presets")
+    data = {k: data[k] for k in order}
+    path.write_text(json.dumps(data, indent=2) + "\n")
+    return path
+
+
+def preset_table_from_results(names=("race_strongest_presets",
+                                     "race_strongest_presets_tandem")):  # fmt: skip
+    """Rebuild the preset table from the presets study's results files in
+    experiments/results/ (`names`: their stems), without measuring."""
+    import csv
+
+    for name in names:
+        path = common.RESULTS / f"{name}.csv"
+        rows = list(csv.DictReader(
+            x for x in path.read_text().splitlines() if not x.startswith("#")
+        ))  # fmt: skip
+        for r in rows:
+            r.update(EA=float(r["EA"]), tol=float(r["tol"]), ok=r["ok"] == "True",
+                     err_m=float(r["err_m"]), cpu_s=float(r["cpu_s"]))  # fmt: skip
+        entries = {
+            (TABLE_SYSTEM.get(system, system), preset): preset_entry(best)
+            for (system, preset), best in table_picks(rows).items()
+            if best is not None
+        }
+        write_preset_table(entries, f"experiments/results/{name}.md")
+
+
 def preset_study(quick=False, systems=None, out_name=""):
     """Measure jaxstring's solvers per system for the accuracy presets; write
     race_strongest_presets.{md,csv}; return the rows and the picks."""
@@ -495,23 +501,15 @@ def preset_study(quick=False, systems=None, out_name=""):
                     N=11 if quick else 21, t1=12.0 if quick else 20.0
                 )
             ts = np.linspace(0.0, float(scene.t1), 5)
-            ref = np.asarray(jaxstring.simulate(
-                scene, "kvaerno5", rtol=1e-11, atol=1e-11, ts=ts,
-                max_steps=common.MAX_STEPS).end_mass)  # fmt: skip
+            ref, _ = harness.reference(scene, ts, "kvaerno5", 1e-11)
             for solver in SOLVERS:
                 _js_curve(scene, solver, ts, ref, system, 0.0, tols, rows)
             continue
         for EA in (1e6,) if quick else EAS:
-            scene = jaxstring.scenes.string_pendulum(
-                formulation=system, k=k, EA=EA, t1=t1
-            )
-            peer = peers.make_rhs(system, k, EA, alpha=0.01)
+            case = harness.PendulumCase(system, EA=EA, k=k, t1=t1)
+            scene = case.scene()
             ts = np.linspace(0.0, t1, 5)
-            jac = "analytic" if peer.jac is not None else "dq"
-            out = peers.cvode_solve(
-                peer, ts, np.ravel(np.asarray(scene.y0)), REF_TOL, REF_TOL, jac=jac
-            )
-            ref = peer.end_mass(out["ys"])
+            ref, _ = harness.reference(case, ts, "cvode-numba", REF_TOL)
             for solver in SOLVERS:
                 _js_curve(scene, solver, ts, ref, system, EA, tols, rows)
     picks = pick_presets(rows)
@@ -531,8 +529,9 @@ def preset_study(quick=False, systems=None, out_name=""):
         lines.append(f"| {system} | {preset} | {PRESET_TARGETS[preset]:g} m | "
                      f"{solver} | {tol:g} | {errs} m | {cpus} |")  # fmt: skip
     columns = "system EA solver tol ok err_m wall_s cpu_s steps compile_s".split()
+    name = "race_strongest_presets" + (f"_{out_name}" if out_name else "")
     common.write_report(
-        "race_strongest_presets" + (f"_{out_name}" if out_name else ""),
+        name,
         "Accuracy presets: the fastest solver and tolerance per system",
         "Pendulum: k = 40, alpha = 0.01 s, 2 s, EA = 1e6 and 1e9 N (cases); error "
         "= largest end-mass distance at 0.5, 1, 1.5, 2 s from CVODE-numba at "
@@ -542,8 +541,16 @@ def preset_study(quick=False, systems=None, out_name=""):
         "the shuttle's position at 5 times against Kvaerno5 at 1e-11. One timed "
         "run after the compile.\n\n" + "\n".join(lines),
         csv_lines=[",".join(columns)]
-        + [",".join(str(r[c]) for c in columns) for r in rows],
+        + [",".join(str(r.get(c)) for c in columns) for r in rows],
     )
+    if not quick and common.results_dir() == common.RESULTS:
+        # the full run's choice goes into the package's preset table
+        entries = {
+            (TABLE_SYSTEM.get(system, system), preset): preset_entry(best)
+            for (system, preset), best in table_picks(rows).items()
+            if best is not None
+        }
+        write_preset_table(entries, f"experiments/results/{name}.md")
     return rows, picks
 
 
@@ -583,6 +590,10 @@ if __name__ == "__main__":
 
     if "--merge" in sys.argv:
         merge(sys.argv[sys.argv.index("--merge") + 1].split(","))
+        sys.exit(0)
+    if "--preset-table" in sys.argv:
+        # jaxstring/presets.json from the presets study's results files
+        preset_table_from_results()
         sys.exit(0)
     if "--presets" in sys.argv:
         # --presets [--quick] [tandem|tether|...]: the systems to measure (a

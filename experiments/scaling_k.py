@@ -2,10 +2,10 @@
 
 Question: how does run time grow with k = 10 ... 640 (the paper reports about k^2)
 for the best jaxstring solver and for CVODE as an expert sets it up? The main peer
-is CVODE-numba (experiments/peers.py): the same equations in numba, CVODE BDF with
+is CVODE-numba (jaxstring/testing/peers.py): the same equations in numba, CVODE BDF with
 the band linear solver and the analytic band Jacobian (displacement variables) or
 CVODE's band difference quotients ((eps, phi) variables). CVODE driving jaxstring's
-own JAX functions through Python callbacks (experiments/references.py, band
+own JAX functions through Python callbacks (jaxstring/testing/references.py, band
 Jacobian from JAX) is a second, labelled row. The best jaxstring solver is the
 fastest implicit adaptive one at the second k (every candidate runs at the first
 two k). A configuration stops growing k when one run takes longer than the budget.
@@ -33,19 +33,19 @@ over CVODE-numba's at the same k.
 
 Run: ``python experiments/scaling_k.py [--quick] [--formulation displacement]
 [--start swing] [--peers cvode-numba,cvode-BDF] [--rounds 3] [--tol 1e-6]``
-(``--peers``: ``cvode-numba`` and the names of experiments/references.py, run on
+(``--peers``: ``cvode-numba`` and the names of jaxstring/testing/references.py, run on
 JAX callbacks; ``none``: jaxstring alone).
 """
 
 import importlib.util
 import math
-import statistics
 
 import _common as common
+import harness
 import numpy as np
-import references
 
 import jaxstring
+from jaxstring.testing import references
 
 
 KS = (10, 20, 40, 80, 160, 320, 640)
@@ -71,73 +71,35 @@ def fit_exponent(ks, times):
     return float(np.polyfit(np.log(ks), np.log(times), 1)[0])
 
 
-class Code:
-    """One contender at one k: `call()` runs it once and returns a dict with `ok`,
-    `end` (end-mass positions at the save times, or None), `status` and counts;
-    `warmup()` (peers) compiles and returns its seconds."""
-
-    def __init__(self, label, kind, call, warmup=None):
-        self.label, self.kind, self.call, self.warmup = label, kind, call, warmup
+# The columns of this study's tables that have other names in a harness record.
+NAMES = {"code": "solver", "wall_s": "run_s"}
 
 
-def _jaxstring_code(scene, name, ts, tol):
-    def call():
-        return common.simulate_row(scene, name, ts, tol)
-
-    return Code(name, "jaxstring", call)
-
-
-def _numba_code(formulation, k, EA, y0, ts, tol):
-    import peers
-
-    peer = peers.make_rhs(formulation, k, EA, alpha=ALPHA)
-    jac = "analytic" if peer.jac is not None else "dq"
-
-    def call():
-        return common.peer_result(peers.cvode_solve(peer, ts, y0, tol, tol, jac=jac),
-                            peer.end_mass)  # fmt: skip
-
-    tag = "analytic band Jacobian" if jac == "analytic" else "band DQ Jacobian"
-    return Code(f"{CVODE} [{tag}]", "cvode", call, warmup=peer.warmup)
+def _codes(case, scene, ts, active, callbacks):
+    """The codes `active` at one k: CVODE-numba (from the scene's initial state),
+    callback peers (`callbacks`), and jaxstring solvers by name."""
+    y0 = np.ravel(np.asarray(scene.y0, dtype=np.float64))
+    codes = []
+    for name in active:
+        if name == CVODE:
+            codes.append(harness.cvode_numba_code(case.peer(), ts, y0))
+        elif name in callbacks:
+            codes.append(harness.callback_code(
+                scene, name, ts, label=f"{name} on JAX callbacks [band Jacobian]"
+            ))  # fmt: skip
+        else:
+            codes.append(harness.jaxstring_code(scene, name, ts))
+    return codes
 
 
-def _callback_code(scene, name, ts, tol):
-    rhs = references.JaxRHS(scene)
-
-    def call():
-        out = references.solve(rhs, name, ts, tol, tol, "jax-band")
-        return common.peer_result(out, rhs.end_mass)
-
-    return Code(f"{name} on JAX callbacks [band Jacobian]", "callback", call,
-                warmup=rhs.compile)  # fmt: skip
-
-
-def measure(code, repeats, long_run_s=common.LONG_RUN_S):
+def measure(code, tol, repeats, long_run_s=common.LONG_RUN_S):
     """One first call (or the peer's warm-up and a first call), then `repeats` timed
-    runs (one where the first took longer than `long_run_s`). Returns the last
-    run's dict with `run_s`, `cpu_s` (medians), `repeats`, `compile_s`, and the
-    lists `walls`, `cpus`."""
-    warm = code.warmup() if code.warmup is not None else None
-    out, first, _ = common.clock(code.call)
-    walls, cpus = [], []
-    if out["ok"]:
-        for i in range(max(repeats, 1)):
-            out, w, c = common.clock(code.call)
-            walls.append(w)
-            cpus.append(c)
-            if i == 0 and w > long_run_s:
-                break
-    else:
-        walls, cpus = [first], [math.nan]
-    r = dict(out)
-    r.update(
-        run_s=statistics.median(walls),
-        cpu_s=statistics.median(cpus),
-        repeats=len(walls) if out["ok"] else 0,
-        # jaxstring: first call minus the median run; the peers: their warm-up.
-        compile_s=max(first - statistics.median(walls), 0.0) if warm is None else warm,
-    )
-    return r
+    runs (one where the first took longer than `long_run_s`; none where the first
+    failed). Returns the row with `run_s`, `cpu_s` (medians), `repeats` and
+    `compile_s`."""
+    r = harness.repeat(code, tol, repeats, retry_failed=False, long_run_s=long_run_s)
+    r.pop("walls", None)
+    return harness.rows([r], NAMES, drop=())[0]
 
 
 def _ratio(rows, k, field, r):
@@ -164,7 +126,7 @@ def main(
 ):
     """Run the k-scaling study; return (rows, exponents).
 
-    `peers`: "cvode-numba" (the main peer) and names of experiments/references.py
+    `peers`: "cvode-numba" (the main peer) and names of jaxstring/testing/references.py
     (CVODE, IDA, scipy on jaxstring's JAX functions through callbacks); default
     cvode-numba and cvode-BDF (quick: cvode-numba).
 
@@ -202,23 +164,14 @@ def main(
     best = None
     for i, k in enumerate(ks):
         y0 = swing_state(k, EA) if start == "swing" else None
-        scene = jaxstring.scenes.string_pendulum(
-            formulation=formulation, k=k, EA=EA, alpha=ALPHA, t1=t1, y0=y0
-        )
-        y0_flat = np.ravel(np.asarray(scene.y0, dtype=np.float64))
-        codes = []
-        for name in active:
-            if name == CVODE:
-                codes.append(_numba_code(formulation, k, EA, y0_flat, ts, tol))
-            elif name in callbacks:
-                codes.append(_callback_code(scene, name, ts, tol))
-            else:
-                codes.append(_jaxstring_code(scene, name, ts, tol))
+        case = harness.PendulumCase(formulation, EA=EA, k=k, alpha=ALPHA, t1=t1,
+                                    y0=y0)  # fmt: skip
+        scene = case.scene()
+        codes = _codes(case, scene, ts, active, callbacks)
         here = []
         for name, code in zip(list(active), codes):
-            r = measure(code, repeats)
-            r.update(solver=code.label, kind=code.kind, k=k,
-                     n_states=int(scene.y0.size))  # fmt: skip
+            r = measure(code, tol, repeats)
+            r.update(k=k, n_states=int(scene.y0.size))
             rows.append(r)
             here.append(r)
             again.setdefault(k, []).append((r, code))
@@ -247,22 +200,16 @@ def main(
              if r["ok"] and (c.label == best or c.kind == "cvode")]
             for k in ks if k in again
         ]  # fmt: skip
-        times = {id(r): ([], []) for group in redo for r, _ in group}
-        for i in range(rounds):
-            for group in redo:
-                for r, code in group:
-                    out, w, c = common.clock(code.call)
-                    times[id(r)][0].append(w)
-                    times[id(r)][1].append(c)
-                    r["ok"] = r["ok"] and out["ok"]
-            print(f"round {i}: " + ", ".join(
-                f"{r['k']} {r['kind']} {times[id(r)][0][-1]:.3g}"
-                for group in redo for r, _ in group))  # fmt: skip
-        for group in redo:
-            for r, _ in group:
-                w, c = times[id(r)]
-                r.update(run_s=statistics.median(w), cpu_s=statistics.median(c),
-                         repeats=rounds)  # fmt: skip
+        # every k once per round, both codes (medians over the rounds)
+        harness.retime(
+            lambda: [pair for group in redo for pair in group],
+            rounds,
+            combine="median",
+            after_round=lambda i, times: print(f"round {i}: " + ", ".join(
+                f"{r['k']} {r['kind']} {times[id(r)][-1]:.3g}"
+                for group in redo for r, _ in group)),
+            wall="run_s",
+        )  # fmt: skip
     for r in rows:
         r["x_cvode_wall"] = _ratio(rows, r["k"], "run_s", r)
         r["x_cvode_cpu"] = _ratio(rows, r["k"], "cpu_s", r)
@@ -309,11 +256,11 @@ def main(
             *([note] if note else []),
             *([ratio_note] if ratio_note else []),
             f"{CVODE}: CVODE BDF (scikit-sundae) with the band linear solver on the "
-            "numba right-hand side of experiments/peers.py (analytic band Jacobian "
-            "in displacement variables, CVODE's band difference quotients "
+            "numba right-hand side of jaxstring/testing/peers.py (analytic band "
+            "Jacobian in displacement variables, CVODE's band difference quotients "
             "otherwise), from jaxstring's initial state of the scene. 'on JAX "
             "callbacks': jaxstring's vector field and band Jacobian through "
-            "Python callbacks (experiments/references.py).",
+            "Python callbacks (jaxstring/testing/references.py).",
             f"diff_m: largest end-mass distance at the {len(ts)} save times to "
             f"{CVODE} at the same k (to the first successful run where it failed).",
             "run_s (wall), cpu_s (process CPU, all threads): medians of `repeats` "

@@ -8,7 +8,7 @@ how much does it change the answer? Cases (alpha = 0.01, rtol = atol = 1e-6, 2 s
 200k steps at most): EA = 1e8 N released from 3 pi/4 ("snap"), EA = 1e6 N released
 from 170 deg ("170deg"). Each run is compiled on a 10 ms span of the same scene
 first (`compile_s`); `run_s` and `cpu_s` are one full run (wall and process CPU).
-The CVODE-numba peer (experiments/peers.py, sharp law) runs the same cases.
+The CVODE-numba peer (jaxstring/testing/peers.py, sharp law) runs the same cases.
 
 Error: the largest end-mass distance over 41 save times from Rodas5P at
 rtol = atol = 1e-10 with eps_s = 1e-9, the stand-in for the sharp law (whose own
@@ -31,7 +31,6 @@ if __name__ == "__main__":  # as a script only: importing it changes nothing
 
 import math
 import sys
-import time
 
 import numpy as np
 
@@ -40,6 +39,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(__file__))
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
+from harness import clock  # noqa: E402
 
 import jaxstring as js  # noqa: E402
 from jaxstring.pendulum.scenes import SLACK_SMOOTHING  # noqa: E402
@@ -87,18 +87,19 @@ def run(
     are skipped)."""
     ts = lambda t1: jnp.linspace(0.0, t1, N_SAVE)
     kw = dict(rtol=rtol, atol=rtol, max_steps=max_steps)
-    t0 = time.perf_counter()
-    short = scene(formulation, case, k, smoothing, t1=0.01)
-    jax.block_until_ready(js.simulate(short, solver, ts=ts(0.01), **kw).ys)
-    compile_s = time.perf_counter() - t0
+
+    def compile_short():
+        short = scene(formulation, case, k, smoothing, t1=0.01)
+        jax.block_until_ready(js.simulate(short, solver, ts=ts(0.01), **kw).ys)
+
+    _, compile_s, _ = clock(compile_short)
     sc = scene(formulation, case, k, smoothing)
     run_s = cpu_s = math.inf
     for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        traj = js.simulate(sc, solver, ts=ts(T1), **kw)
-        jax.block_until_ready(traj.ys)
-        wall = time.perf_counter() - t0
-        run_s, cpu_s = min(run_s, wall), min(cpu_s, time.process_time() - c0)
+        traj, wall, cpu = clock(
+            lambda: jax.block_until_ready(js.simulate(sc, solver, ts=ts(T1), **kw))
+        )
+        run_s, cpu_s = min(run_s, wall), min(cpu_s, cpu)
         if wall > REPEAT_BUDGET_S:
             break
     return dict(
@@ -114,19 +115,20 @@ def run(
 
 
 def reference(formulation, case, k, smoothing=REF_SMOOTHING, rtol=REF_TOL):
-    t0 = time.perf_counter()
-    traj = js.simulate(
-        scene(formulation, case, k, smoothing),
-        "rodas5p",
-        rtol=rtol,
-        atol=rtol,
-        ts=jnp.linspace(0.0, T1, N_SAVE),
-        max_steps=2_000_000,
+    traj, wall, _ = clock(
+        lambda: js.simulate(
+            scene(formulation, case, k, smoothing),
+            "rodas5p",
+            rtol=rtol,
+            atol=rtol,
+            ts=jnp.linspace(0.0, T1, N_SAVE),
+            max_steps=2_000_000,
+        )
     )
     print(
         f"reference {formulation} {case} k={k} eps_s={smoothing:g} rtol={rtol:g}: "
         f"{traj.status}, {int(traj.stats['num_accepted_steps'])} steps, "
-        f"{time.perf_counter() - t0:.1f} s",
+        f"{wall:.1f} s",
         flush=True,
     )
     return np.asarray(traj.end_mass) if traj.ok else None
@@ -135,7 +137,7 @@ def reference(formulation, case, k, smoothing=REF_SMOOTHING, rtol=REF_TOL):
 def run_cvode(formulation, case, k):
     """The CVODE-numba peer with the sharp law (band Jacobian: analytic in
     displacement variables, CVODE's difference quotients otherwise)."""
-    import peers
+    from jaxstring.testing import peers
 
     c = CASES[case]
     peer = peers.make_rhs(formulation, k=k, EA=c["EA"], alpha=0.01, slack=True)
@@ -143,13 +145,13 @@ def run_cvode(formulation, case, k):
     ts = np.linspace(0.0, T1, N_SAVE)
     y0 = peer.initial_state(c["theta0"])
     compile_s = peer.warmup()
-    t0, c0 = time.perf_counter(), time.process_time()
     # CVODE's step limit holds between two output times.
     per_output = MAX_STEPS // (N_SAVE - 1)
-    out = peers.cvode_solve(
-        peer, ts, y0, rtol=TOL, atol=TOL, jac=jac, max_num_steps=per_output
+    out, run_s, cpu_s = clock(
+        lambda: peers.cvode_solve(
+            peer, ts, y0, rtol=TOL, atol=TOL, jac=jac, max_num_steps=per_output
+        )
     )
-    run_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
     return dict(
         ok=out["ok"],
         status="success" if out["ok"] else out["message"][:40],
@@ -376,12 +378,8 @@ def gradient_study(quick=False):
             kw["max_steps"] = 1_000_000
             call = lambda kw=kw: js.value_and_grad(sc, _end_loss, ["alpha", "EA"], **kw)
             try:
-                t0 = time.perf_counter()
-                call()
-                first = time.perf_counter() - t0
-                t0 = time.perf_counter()
-                _, grad = call()
-                row["run_s"] = time.perf_counter() - t0
+                _, first, _ = clock(call)
+                (_, grad), row["run_s"], _ = clock(call)
                 row["compile_s"] = max(first - row["run_s"], 0.0)
                 row["ok"] = True
             except Exception as e:  # noqa: BLE001 (a failure is a result)
@@ -503,10 +501,10 @@ def step_figure(smoothing, k):
     """Step size over time, sharp (before) and smoothed (after), EA = 1e8 snap, in
     each formulation with its preset solver; the per-step log, in 10 ms windows,
     in slack_snap_steps.csv."""
-    from _common import new_figure, results_dir, savefig, stamp_line
+    from _common import new_figure, savefig, write_text
 
     fig, axes = new_figure(ncols=3, w=4.6, h=3.6)
-    lines = [f"# {stamp_line()}", STEP_HEADER]
+    lines = [STEP_HEADER]
     for ax, f in zip(axes[0], FORMULATIONS):
         solver = SOLVERS[f][0]
         for law, eps_s, color in (("sharp", 0.0, "0.6"), ("smooth", smoothing, "C0")):
@@ -524,7 +522,7 @@ def step_figure(smoothing, k):
         fontsize=9,
     )
     savefig(fig, "slack_snap")
-    (results_dir() / "slack_snap_steps.csv").write_text("\n".join(lines) + "\n")
+    write_text("slack_snap_steps.csv", "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

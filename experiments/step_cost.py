@@ -21,10 +21,10 @@ import gzip
 import json
 import os
 import tempfile
-import time
 
 import diffrax as dfx
 import equinox as eqx
+import harness
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -56,20 +56,10 @@ KERNEL_COLUMNS = tuple(
 
 def loop_us(body, x0, const, n):
     """Best of 5 of the mean time of one `body(x, const)` call in a compiled loop of
-    `n`. `const` (the scene, the matrix, the factorisation) is an argument of the
-    compiled function, not a constant folded into it, as in the solver."""
-
-    @eqx.filter_jit
-    def f(x, c):
-        return jax.lax.fori_loop(0, n, lambda i, x: body(x, c), x)
-
-    jax.block_until_ready(f(x0, const))
-    best = np.inf
-    for _ in range(5):
-        t = time.perf_counter()
-        jax.block_until_ready(f(x0, const))
-        best = min(best, (time.perf_counter() - t) / n * 1e6)
-    return best
+    `n` (`harness.in_loop_us`). `const` (the scene, the matrix, the factorisation)
+    is an argument of the compiled function, not a constant folded into it, as in
+    the solver."""
+    return harness.in_loop_us(body, x0, const, n=n, rounds=5, stat=min)
 
 
 def _touch(tree):
@@ -149,9 +139,8 @@ def simulate_per_step(k, t1):
     steps = {}
     for _ in range(3):
         for name, run in runs.items():
-            t = time.perf_counter()
-            traj = run()
-            best[name] = min(best[name], time.perf_counter() - t)
+            traj, wall, _ = harness.clock(run)
+            best[name] = min(best[name], wall)
             steps[name] = int(traj.stats["num_steps"])
     assert steps["model"] == steps["probed"], steps
     n = steps["model"]
@@ -187,9 +176,8 @@ def kernels_per_step(k, t1, solver):
     run()
     best = np.inf
     for _ in range(3):
-        t = time.perf_counter()
-        traj = run()
-        best = min(best, time.perf_counter() - t)
+        traj, wall, _ = harness.clock(run)
+        best = min(best, wall)
     attempts = int(traj.stats["num_steps"])
     with tempfile.TemporaryDirectory() as d:
         with jax.profiler.trace(d, create_perfetto_trace=True):

@@ -4,7 +4,7 @@ Question: is one compiled jaxstring sweep faster than the strongest peer run mem
 by member? Case: the pendulum in displacement variables (EA = 1e6 N, 2 s, k = 20
 and 40), 64 Kelvin-Voigt constants alpha in [0.005, 0.05] s. The peer: CVODE BDF,
 numba right-hand side, analytic banded Jacobian, band linear solver
-(experiments/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
+(jaxstring/testing/peers.py) at rtol = atol = `--cvode-tol`, one member after the other.
 jaxstring: `sweep` (`--mode` vmap or lockstep, groups of `--group` sorted by alpha,
 on every device of JAX's default backend: the script sets
 `--xla_force_host_platform_device_count=2`, whose two CPU devices run their shards
@@ -20,7 +20,6 @@ Run: ``python experiments/sweep_race.py [--quick]``.
 """
 
 import os
-import time
 
 
 # Imported first: it gives JAX two host CPU devices (the machine's two cores) and
@@ -29,10 +28,10 @@ from sweep_speed import end_mass  # isort: skip
 
 import _common as common
 import numpy as np
-import peers
 
 import jaxstring as js
 from jaxstring._sweep import sweep
+from jaxstring.testing import peers
 
 
 def _cvode_loop(k, alphas, ts, tol):
@@ -66,9 +65,8 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode, peer_membe
     picked = alphas[::stride]
     ts = np.linspace(0.0, 2.0, 5)
     numba_s = peers.make_rhs("displacement", k, 1e6).warmup()
-    t0 = time.perf_counter()
-    refs = _cvode_loop(k, picked, ts, 1e-10)
-    print(f"k={k}: references in {time.perf_counter() - t0:.1f} s", flush=True)
+    refs, wall, _ = common.clock(lambda: _cvode_loop(k, picked, ts, 1e-10))
+    print(f"k={k}: references in {wall:.1f} s", flush=True)
     base = js.scenes.string_pendulum(k=k, EA=1e6, t1=2.0)
 
     def run_sweep(tol):
@@ -128,14 +126,21 @@ def main(quick=False, ks=None, members=None, solver="bdf", tols=None,
     members = members or (8 if quick else 64)
     peer_members = min(peer_members or members, members)
     if members % peer_members:
-        raise ValueError(
-            f"peer_members={peer_members} must divide members={members}"
-        )
+        raise ValueError(f"peer_members={peer_members} must divide members={members}")
     tols = tols or [3e-6, 2e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
     repeats = repeats or (1 if quick else 2)
     rows = [
-        race_k(k, members, solver, tols, cvode_tol, repeats, min(group, members), mode,
-               peer_members)  # fmt: skip
+        race_k(
+            k,
+            members,
+            solver,
+            tols,
+            cvode_tol,
+            repeats,
+            min(group, members),
+            mode,
+            peer_members,
+        )  # fmt: skip
         for k in ks
     ]
     cols = (

@@ -59,12 +59,18 @@ if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", "")
     ).strip()
 
 import statistics
-import time
 
 import _common as common
 import jax
 import numpy as np
-from _common import end_mass_error, new_figure, savefig, set_quick, write_table
+from _common import (
+    clock,
+    end_mass_error,
+    new_figure,
+    savefig,
+    set_quick,
+    write_table,
+)
 
 import jaxstring as js
 from jaxstring._sweep import sweep
@@ -167,9 +173,8 @@ def profile(k, Ms, quick):
             lambda *a: jax.lax.fori_loop(0, reps, lambda i, c: f(*a, c), jnp.zeros(()))
         )
         jax.block_until_ready(g(*a))
-        c = time.process_time()
-        jax.block_until_ready(g(*a))
-        return (time.process_time() - c) / reps * 1e6
+        _, _, cpu = clock(lambda: jax.block_until_ready(g(*a)))
+        return cpu / reps * 1e6
 
     for M in Ms:
         batch = _Batch((jnp.linspace(0.005, 0.05, M),), base, (resolve(base, "alpha"),))
@@ -221,9 +226,8 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
     # Tight reference on the first and last member.
     ref_idx = np.array([0, n - 1])
     ref_kw = dict(solver="kvaerno5", rtol=1e-10, atol=1e-10, n_save=51)
-    t = time.perf_counter()
-    ref, _ = _loop(alphas[ref_idx], k, t1, ref_kw)
-    print(f"reference ({len(ref_idx)} members) {time.perf_counter() - t:.0f} s")
+    (ref, _), wall, _ = clock(lambda: _loop(alphas[ref_idx], k, t1, ref_kw))
+    print(f"reference ({len(ref_idx)} members) {wall:.0f} s")
 
     def ref_err(out):
         return max(end_mass_error(out[i], r) for i, r in zip(ref_idx, ref))
@@ -297,17 +301,16 @@ def main(quick=False, n=64, k=20, t1=2.0, rounds=3, failure_only=False):
         # minutes, and interleaving exposes every variant to the same changes.
         firsts, outs = [], []
         for name, call in calls:
-            t = time.perf_counter()
-            outs.append(call())
-            firsts.append(time.perf_counter() - t)
+            out, wall, _ = clock(call)
+            outs.append(out)
+            firsts.append(wall)
         walls = [[] for _ in calls]
         cpus = [[] for _ in calls]
         for r in range(rounds):
             for j, (name, call) in enumerate(calls):
-                t, c = time.perf_counter(), time.process_time()
-                call()
-                walls[j].append(time.perf_counter() - t)
-                cpus[j].append(time.process_time() - c)
+                _, wall, cpu = clock(call)
+                walls[j].append(wall)
+                cpus[j].append(cpu)
             print(
                 f"{case} round {r}: "
                 + ", ".join(

@@ -22,12 +22,11 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, run_study, set_quick, write_report
+from _common import clock, results_dir, run_study, set_quick, stamp_file, write_report
 
 import jaxstring as js
 from jaxstring.tandem import plot as tp
@@ -71,11 +70,12 @@ def run(scene, solver="tsit5", repeats=1, n_save=None):
     ts = jnp.linspace(0.0, float(scene.t1), n_save)
     walls = []
     for _ in range(repeats + 1):
-        t = time.perf_counter()
-        traj = jax.block_until_ready(
-            js.simulate(scene, solver, rtol=1e-8, atol=1e-8, ts=ts, max_steps=10**6)
+        traj, wall, _ = clock(
+            lambda: jax.block_until_ready(
+                js.simulate(scene, solver, rtol=1e-8, atol=1e-8, ts=ts, max_steps=10**6)
+            )
         )
-        walls.append(time.perf_counter() - t)
+        walls.append(wall)
     run_s = float(np.median(walls[1:]))
     return traj, walls[0] - run_s, run_s
 
@@ -159,13 +159,12 @@ def main(quick=False, mismatch=False):
             rows.append((law, env, *[m[k] for k in KEYS]))
             lines.append(row(law, env, m, run_s))
             if law == "B":
+                png = results_dir() / f"tanker_controlled_{env}{sfx}.png"
                 tp.tandem_figure(
-                    traj,
-                    sc.model,
-                    os.path.join(results_dir(), f"tanker_controlled_{env}{sfx}.png"),
-                    title=f"S4 law B, {env}",
+                    traj, sc.model, str(png), title=f"S4 law B, {env}",
                     d_ref=float(ctl.d_ref),
-                )
+                )  # fmt: skip
+                stamp_file(png)
     # Model mismatch (no integral action: the compensator has no integral term).
     lines += [
         "",

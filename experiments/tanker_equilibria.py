@@ -24,10 +24,16 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import time
 
 import numpy as np
-from _common import results_dir, run_study, set_quick, write_report
+from _common import (
+    clock,
+    results_dir,
+    run_study,
+    set_quick,
+    stamp_file,
+    write_report,
+)
 
 import jaxstring  # noqa: F401
 from jaxstring.cli.tandem import S1_CELLS_FULL, S1_SPEC
@@ -77,16 +83,18 @@ def compare_methods(cells, newton, sfx):
     scenes = {c: tandem_equilibria(V_w=c[0], Delta_w_deg=c[1]) for c in cells}
     found = {"newton": newton}
     for m in ("dogleg", "lm"):
-        t = time.perf_counter()
-        res = dict(
-            zip(windy, find_equilibria_map([scenes[c] for c in windy], method=m))
-        )
-        res[(0.0, 0.0)] = find_equilibria(scenes[(0.0, 0.0)], method=m)
-        found[m] = res
-        print(f"{m}: {time.perf_counter() - t:.0f} s (incl. compile)", flush=True)
-    t = time.perf_counter()
-    found["hybr"] = {c: _hybr_cell(scenes[c]) for c in cells}
-    print(f"hybr: {time.perf_counter() - t:.0f} s", flush=True)
+
+        def solve(m=m):
+            res = dict(
+                zip(windy, find_equilibria_map([scenes[c] for c in windy], method=m))
+            )
+            res[(0.0, 0.0)] = find_equilibria(scenes[(0.0, 0.0)], method=m)
+            return res
+
+        found[m], wall, _ = clock(solve)
+        print(f"{m}: {wall:.0f} s (incl. compile)", flush=True)
+    found["hybr"], wall, _ = clock(lambda: {c: _hybr_cell(scenes[c]) for c in cells})
+    print(f"hybr: {wall:.0f} s", flush=True)
     names = list(found)
     off = dict.fromkeys(names, 0)
     lines = [
@@ -147,20 +155,21 @@ def main(quick=False, repeats=None, methods=False):
     scenes = [tandem_equilibria(V_w=v, Delta_w_deg=d) for v, d in windy]
     times = []
     for _ in range(repeats + 1):
-        t = time.perf_counter()
-        res = find_equilibria_map(scenes)
-        times.append(time.perf_counter() - t)
+        res, wall, _ = clock(lambda: find_equilibria_map(scenes))
+        times.append(wall)
     compile_s = times[0] - float(np.median(times[1:]))
     calm = find_equilibria(tandem_equilibria())
     results = dict(zip(windy, res))
     results[(0.0, 0.0)] = calm
     ordered = [results[c] for c in cells]
+    png = results_dir() / f"tanker_equilibria{sfx}.png"
     tp.equilibrium_map(
         cells,
         ordered,
-        os.path.join(results_dir(), f"tanker_equilibria{sfx}.png"),
+        str(png),
         title="S1: FPSO + shuttle equilibria, current 1 m/s",
     )
+    stamp_file(png)
     lines = [
         "| V_w m/s | Delta_w deg | taut/adm/stab (ours) | spec [P] | stable "
         "admissible headings (psi1, psi2) deg |",

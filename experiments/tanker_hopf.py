@@ -16,12 +16,18 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import math
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, set_quick, stamp_markdown
+from _common import (
+    clock,
+    results_dir,
+    results_file,
+    set_quick,
+    stamp_file,
+    stamp_markdown,
+)
 
 import jaxstring as js
 from jaxstring.tandem import plot as tp
@@ -36,18 +42,20 @@ def main(quick=False):
     set_quick(quick)
     sfx = "_quick" if quick else ""
     Fs = np.linspace(0.0, 60e3, 7 if quick else 25)
-    t = time.perf_counter()
-    Fs, _, lead, F_star = hopf_sweep(lambda F: tandem_hopf(F_ast=F), Fs)
-    sweep_s = time.perf_counter() - t
+    (Fs, _, lead, F_star), sweep_s, _ = clock(
+        lambda: hopf_sweep(lambda F: tandem_hopf(F_ast=F), Fs)
+    )
     w_star = float(np.interp(F_star, Fs, np.abs(lead.imag)))
+    png = results_dir() / f"tanker_hopf_sweep{sfx}.png"
     tp.sweep_figure(
         Fs / 1e3,
         lead,
-        os.path.join(results_dir(), f"tanker_hopf_sweep{sfx}.png"),
+        str(png),
         "astern pull F_ast, kN",
         "S3b: fishtail pair of the aligned equilibrium",
         marks=[F_star / 1e3],
     )
+    stamp_file(png)
     lines = [
         f"Hopf point F_ast* = {F_star / 1e3:.2f} kN (spec 43 kN), frequency "
         f"{w_star:.4e} rad/s (spec 3.34e-3), period {2 * math.pi / w_star:.0f} s "
@@ -65,11 +73,14 @@ def main(quick=False):
         ts = jnp.linspace(0.0, t1, int(t1 / 10) + 1)
         walls = []
         for _ in range(2):
-            start = time.perf_counter()
-            traj = jax.block_until_ready(
-                js.simulate(sc, "tsit5", rtol=1e-8, atol=1e-8, ts=ts, max_steps=10**6)
+            traj, wall, _ = clock(
+                lambda: jax.block_until_ready(
+                    js.simulate(
+                        sc, "tsit5", rtol=1e-8, atol=1e-8, ts=ts, max_steps=10**6
+                    )
+                )
             )
-            walls.append(time.perf_counter() - start)
+            walls.append(wall)
         m = measure_limit_cycle(traj, 0.6 * t1)
         ps, ys = SPEC[F]
         lines.append(
@@ -94,12 +105,11 @@ def main(quick=False):
                 )
             )
         )
+        png = results_dir() / f"tanker_hopf_{F / 1e3:.0f}kN{sfx}.png"
         tp.tandem_figure(
-            traj,
-            sc.model,
-            os.path.join(results_dir(), f"tanker_hopf_{F / 1e3:.0f}kN{sfx}.png"),
-            title=f"limit cycle, F_ast = {F / 1e3:.0f} kN",
+            traj, sc.model, str(png), title=f"limit cycle, F_ast = {F / 1e3:.0f} kN"
         )
+        stamp_file(png)
     lines.append("")
     lines.append(
         "Measured over the last 40 % of each run; runs start 5 deg off the "
@@ -107,7 +117,7 @@ def main(quick=False):
     )
     text = "\n".join(lines)
     print(text)
-    with open(os.path.join(results_dir(), f"tanker_hopf{sfx}.md"), "w") as f:
+    with results_file(f"tanker_hopf{sfx}.md") as f:
         f.write(
             "# S3 Hopf sweep and limit cycles\n\n"
             + stamp_markdown()
@@ -115,7 +125,7 @@ def main(quick=False):
             + text
             + "\n"
         )
-    with open(os.path.join(results_dir(), f"tanker_hopf{sfx}.csv"), "w") as f:
+    with results_file(f"tanker_hopf{sfx}.csv") as f:
         f.write("\n".join(csv) + "\n")
 
 

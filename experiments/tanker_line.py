@@ -32,8 +32,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from _common import (
-    results_dir,
+    results_file,
     run_study,
+    savefig,
     set_quick,
     stamp_markdown,
     timed_wall_cpu,
@@ -147,7 +148,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
     sfx = "_quick" if quick else ""
     base_run = rows_f[0]["run_s"]
     keys = "period shuttle_yaw fpso_yaw lateral_excursion span_min tension_max".split()
-    with open(os.path.join(results_dir(), f"tanker_line{sfx}.csv"), "w") as f:
+    with results_file(f"tanker_line{sfx}.csv") as f:
         f.write(
             "hawser,N,solver,tol,status,steps,compile_s,run_s,cpu_s,"
             + ",".join(keys)
@@ -222,7 +223,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
         "the slack line comes taut set the step size.",
     ]
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(results_dir(), f"tanker_line{sfx}.md"), "w") as f:
+    with results_file(f"tanker_line{sfx}.md") as f:
         f.write(text)
     print(text)
 
@@ -242,7 +243,7 @@ def write(rows_s, lam0, rows_f, trajs, t1, quick):
     axes[0].legend(fontsize=7)
     fig.suptitle("Fishtailing: massless hawser vs a line with mass and drag")
     fig.tight_layout()
-    fig.savefig(os.path.join(results_dir(), f"tanker_line{sfx}.png"), dpi=110)
+    savefig(fig, f"tanker_line{sfx}", dpi=110, tight=False)
     plt.close(fig)
 
 
@@ -286,9 +287,7 @@ def controlled_study(quick):
         "cpu_s",
         *keys,
     ]
-    with open(
-        os.path.join(results_dir(), f"tanker_line_controlled{sfx}.csv"), "w"
-    ) as f:
+    with results_file(f"tanker_line_controlled{sfx}.csv") as f:
         f.write(",".join(head) + "\n")
         for r in rows:
             f.write(",".join(str(r[k]) for k in head) + "\n")
@@ -316,7 +315,7 @@ def controlled_study(quick):
             f"{r['X_final'] / 1e3:.0f} | {r['ok']} |"
         )
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(results_dir(), f"tanker_line_controlled{sfx}.md"), "w") as f:
+    with results_file(f"tanker_line_controlled{sfx}.md") as f:
         f.write(text)
     print(text)
 

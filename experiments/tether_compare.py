@@ -25,7 +25,14 @@ import csv
 import _common as common
 import jax.numpy as jnp
 import numpy as np
-from _common import results_dir, set_quick, stamp_markdown
+from _common import (
+    results_dir,
+    results_file,
+    savefig,
+    set_quick,
+    stamp_file,
+    stamp_markdown,
+)
 
 import jaxstring as js
 import jaxstring.tether.plot as tplot
@@ -118,9 +125,10 @@ def main(quick=False):
     rows.append(summary("fixed exact (D_t = pi d l_e, sharp)", ew, cew, rew, pew))
     tplot.summary_figure(
         a,
-        os.path.join(results_dir(), "tether_fixed.png"),
+        str(results_dir() / "tether_fixed.png"),
         "tether-fixed (ACEAM, Table 1, dopri5)",
     )
+    stamp_file(results_dir() / "tether_fixed.png")
     e0, ce0, re0, pe0 = timed(tether_fixed("exact"), repeats)
     rows.append(summary("fixed exact (sharp schedule)", e0, ce0, re0, pe0))
     e1, ce1, re1, pe1 = timed(tether_fixed("exact", smoothing=1.0), repeats)
@@ -158,9 +166,10 @@ def main(quick=False):
     rows.append(summary("winch aceam (law as printed)", w0, cw0, rw0, pw0))
     tplot.summary_figure(
         w1,
-        os.path.join(results_dir(), "tether_winch.png"),
+        str(results_dir() / "tether_winch.png"),
         "tether-winch (ACEAM, reference model on the tracking error, dopri5)",
     )
+    stamp_file(results_dir() / "tether_winch.png")
     w2, cw2, rw2, pw2 = timed(tether_winch("exact", smoothing=1.0), repeats)
     rows.append(summary("winch exact (1 s ramps)", w2, cw2, rw2, pw2))
     w3, cw3, rw3, pw3 = timed(tether_winch("lms"), repeats)
@@ -210,13 +219,11 @@ def main(quick=False):
 
     # -- outputs
     keys = list(rows[0])
-    with open(os.path.join(results_dir(), "tether_compare.csv"), "w", newline="") as f:
+    with results_file("tether_compare.csv") as f:
         wr = csv.DictWriter(f, keys)
         wr.writeheader()
         wr.writerows(rows)
-    with open(
-        os.path.join(results_dir(), "tether_sharp_bend.csv"), "w", newline=""
-    ) as f:
+    with results_file("tether_sharp_bend.csv") as f:
         wr = csv.DictWriter(f, list(sharp[0]))
         wr.writeheader()
         wr.writerows(sharp)
@@ -330,7 +337,7 @@ def main(quick=False):
         "`tether_moordyn.md`).",
     ]
     text = "\n".join(lines)
-    with open(os.path.join(results_dir(), "tether_compare.md"), "w") as f:
+    with results_file("tether_compare.md") as f:
         f.write(text + "\n")
     print(text)
 
@@ -361,7 +368,7 @@ def _figure(rows, lms, a, e1, aw):
     ax2.set_ylabel("(L_r - L_a)/L_r [%]")
     ax2.legend()
     ax2.grid(True, lw=0.3, alpha=0.5)
-    fig.savefig(os.path.join(results_dir(), "tether_compare.png"), dpi=110)
+    savefig(fig, "tether_compare", dpi=110, tight=False)
     plt.close(fig)
 
 

@@ -80,7 +80,6 @@ import math
 import statistics
 import struct
 import tempfile
-import time
 
 import _common as common
 import equinox as eqx
@@ -312,11 +311,14 @@ def run_moordyn(scene, nodes0, t_out, segments, EA, cfl=CFL, workdir=None):
     root = np.array([0.0, 0.0, DEPTH_SHIFT])
     dtc = float(t_out[1] - t_out[0])
     with common.quiet_fd():
-        t0 = time.perf_counter()
-        system = moordyn.Create(path)
-        moordyn.Init_NoIC(system, [*root, *ends(t_out[0])], [0.0] * 6)
-        _set_line_state(system, workdir, interior)
-        setup_s = time.perf_counter() - t0
+
+        def setup():
+            system = moordyn.Create(path)
+            moordyn.Init_NoIC(system, [*root, *ends(t_out[0])], [0.0] * 6)
+            _set_line_state(system, workdir, interior)
+            return system
+
+        system, setup_s, _ = common.clock(setup)
         dtM = _get_dt(system)
         line = moordyn.GetLine(system, 1)
         pt_fast = moordyn.GetPoint(system, 2)
@@ -332,10 +334,11 @@ def run_moordyn(scene, nodes0, t_out, segments, EA, cfl=CFL, workdir=None):
         for a in t_out[:-1]:
             xa, xb = ends(a), ends(a + dtc)
             va = (xb - xa) / dtc  # exact: the schedule is linear over each step
-            w, c = time.perf_counter(), time.process_time()
-            f = moordyn.Step(system, [*root, *xa], [0.0, 0.0, 0.0, *va], a, dtc)
-            wall += time.perf_counter() - w
-            cpu += time.process_time() - c
+            f, w, c = common.clock(
+                lambda: moordyn.Step(system, [*root, *xa], [0.0, 0.0, 0.0, *va], a, dtc)
+            )
+            wall += w
+            cpu += c
             if f0 is None:  # forces at t_out[0] are not returned; repeat the first
                 f0 = f
                 record(f)

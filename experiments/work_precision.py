@@ -17,10 +17,11 @@ Run: ``python experiments/work_precision.py [--quick]``.
 import math
 
 import _common as common
+import harness
 import numpy as np
-import references
 
 import jaxstring
+from jaxstring.testing import references
 
 
 FORMULATIONS = ("displacement", "natural", "angle")
@@ -28,9 +29,11 @@ EAS = (1e4, 1e6, 1e8, 1e9)
 TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 PEER_JAC = "jax-band"
 TARGETS = (1e-3, 1e-5, 1e-7)  # end-mass accuracy levels (m) for the headline
+# The columns of this study's tables that have other names in a harness record.
+NAMES = {"code": "solver", "wall_s": "run_s"}
 
 
-def references_pair(scene, ts, tol, max_steps=1_000_000):
+def references_pair(scene, ts, tol, max_steps=1_000_000, rhs=None):
     """Two tight references from different solvers: (ref_a, label_a, ref_b, label_b).
 
     ref_a (CVODE, BDF) judges jaxstring's solvers and Radau; ref_b (scipy Radau,
@@ -38,18 +41,14 @@ def references_pair(scene, ts, tol, max_steps=1_000_000):
     Without the peers installed, jaxstring's Kvaerno5 stands in.
     """
     avail = references.available()
-    rhs = references.JaxRHS(scene)
     refs = []
     for peer in ("cvode-BDF", "scipy-Radau"):
         if avail[peer]:
-            out = references.solve(rhs, peer, ts, tol, tol, PEER_JAC)
-            if out["ok"]:
-                refs.append((rhs.end_mass(out["ys"]), f"{peer} at {tol:g}"))
+            end, label = harness.reference(scene, ts, peer, tol, rhs=rhs)
+            if end is not None:
+                refs.append((end, label))
     if len(refs) < 2:
-        traj = jaxstring.simulate(
-            scene, "kvaerno5", rtol=tol, atol=tol, ts=ts, max_steps=max_steps
-        )
-        refs.append((np.asarray(traj.end_mass), f"kvaerno5 at {tol:g}"))
+        refs.append(harness.reference(scene, ts, "kvaerno5", tol, max_steps=max_steps))
     (ref_a, lab_a), (ref_b, lab_b) = refs[0], refs[1]
     return ref_a, lab_a, ref_b, lab_b
 
@@ -90,36 +89,27 @@ def main(
     rows, floors = [], []
     for form in formulations:
         for EA in EAs:
-            scene = jaxstring.scenes.string_pendulum(
-                formulation=form, k=k, EA=EA, t1=t1
-            )
+            scene = harness.PendulumCase(form, EA=EA, k=k, t1=t1).scene()
+            rhs = references.JaxRHS(scene)
             ref_a, lab_a, ref_b, lab_b = references_pair(
-                scene, ts, ref_tol, common.MAX_STEPS if quick else 1_000_000
+                scene, ts, ref_tol, common.MAX_STEPS if quick else 1_000_000, rhs
             )
             floor = common.end_mass_error(ref_a, ref_b)
             floors.append(f"{form} EA={EA:g}: |{lab_a} - {lab_b}| = {floor:.2e} m")
-            rhs = references.JaxRHS(scene)
-            curves = [(n, "js") for n in names] + [(p, "peer") for p in peers]
-            for who, kind in curves:
+            codes = [(harness.jaxstring_code(scene, n, ts), "js") for n in names]
+            codes += [
+                (harness.callback_code(scene, p, ts, label=f"{p} [{PEER_JAC}]",
+                                       jac=PEER_JAC, rhs=rhs), "peer")
+                for p in peers
+            ]  # fmt: skip
+            for code, kind in codes:
                 for tol in tols:
-                    if kind == "js":
-                        r = common.run_jaxstring(
-                            scene, who, ts, rtol=tol, atol=tol, repeats=repeats
-                        )
-                        ref = ref_a
-                    else:
-                        r = common.run_peer(
-                            rhs, who, PEER_JAC, ts, rtol=tol, atol=tol, repeats=repeats
-                        )
-                        ref = ref_a if who == "scipy-Radau" else ref_b
-                    end = r.pop("end")
-                    r.update(
-                        formulation=form,
-                        EA=EA,
-                        tol=tol,
-                        kind=kind,
-                        err_m=common.end_mass_error(end, ref) if r["ok"] else math.nan,
-                    )
+                    # jaxstring: a first call, then the median of `repeats`; the
+                    # peers: the callbacks' JIT compile apart, then the median
+                    rec = harness.repeat(code, tol, repeats, first=kind == "js")
+                    ref = ref_a if kind == "js" or "Radau" in code.label else ref_b
+                    (r,) = harness.rows(harness.score([rec], ref), NAMES)
+                    r.update(formulation=form, EA=EA, kind=kind)
                     rows.append(r)
                     print(
                         f"{form} EA={EA:g} {r['solver']} tol={tol:g}: "

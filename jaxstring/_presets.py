@@ -8,53 +8,64 @@
 
 Each preset names an end-mass (or tracked-point) error target, `PRESET_TARGETS`.
 For each system the preset is the (solver, rtol = atol) that reached the target in
-every measured case at the least time (``experiments/race_strongest.py
---presets``); ``ACCURACY_PRESETS[name][system]`` holds it with the measured error
-(m) and time (s) per case. The measurements and their cases are on the docs'
-performance page ("Accuracy presets").
+every measured case at the least time; ``ACCURACY_PRESETS[name][system]`` holds it
+with the measured error (m) and time (s) per case, read from the table
+``presets.json`` that the presets study writes (``experiments/race_strongest.py
+--presets``). The measurements and their cases are on the docs' performance page
+("Accuracy presets").
 """
+
+import json
+import pathlib
 
 from ._solve_config import SolveConfig
 from ._validate import check_choice
 
 
-PRESET_TARGETS = {"draft": 1e-3, "balanced": 1e-5, "precise": 1e-7}
-"""End-mass (or tracked-point) error each preset was chosen to reach, m."""
+TABLE = pathlib.Path(__file__).with_name("presets.json")
+"""The measured presets, written by ``experiments/race_strongest.py --presets`` (or
+``--preset-table`` from its results files), with the stamp of the write and, per
+system, the results file the numbers come from."""
 
 
-def _p(solver, tol, error_m, cpu_s):
+def _read(path=None) -> dict:
+    return json.loads(pathlib.Path(path or TABLE).read_text())
+
+
+def load_presets(path=None) -> dict:
+    """The presets as ``{preset: {system: {"solver", "rtol", "atol", "error_m",
+    "cpu_s"}}}`` (the measured error, m, and time, s, of each case); `path`:
+    another table."""
     return {
-        "solver": solver,
-        "rtol": tol,
-        "atol": tol,
-        "error_m": error_m,
-        "cpu_s": cpu_s,
+        name: {
+            system: {
+                "solver": entry["solver"],
+                "rtol": float(entry["rtol"]),
+                "atol": float(entry["atol"]),
+                "error_m": tuple(float(x) for x in entry["error_m"]),
+                "cpu_s": tuple(float(x) for x in entry["cpu_s"]),
+            }
+            for system, entry in systems.items()
+        }
+        for name, systems in _read(path)["presets"].items()
     }
 
 
-ACCURACY_PRESETS = {
-    "draft": {
-        "displacement": _p("bdf", 1e-5, (5.0e-5, 3.0e-6), (0.12, 0.29)),
-        "natural": _p("rodas5p", 1e-3, (1.3e-4, 1.4e-4), (0.14, 0.14)),
-        "angle": _p("rodas5p", 1e-3, (1.5e-4, 1.3e-4), (0.09, 0.11)),
-        "tether": _p("rodas5p", 1e-4, (2.7e-5,), (0.03,)),
-        "other": _p("rodas5p", 1e-6, (6.5e-4,), (0.01,)),
-    },
-    "balanced": {
-        "displacement": _p("bdf", 1e-7, (2.1e-6, 6.8e-7), (0.21, 0.34)),
-        "natural": _p("rodas5p", 1e-5, (2.0e-6, 2.2e-6), (0.32, 0.32)),
-        "angle": _p("rodas5p", 1e-5, (2.0e-6, 1.5e-6), (0.18, 0.24)),
-        "tether": _p("rodas5p", 1e-5, (8.1e-7,), (0.08,)),
-        "other": _p("rodas5p", 1e-8, (3.5e-6,), (0.02,)),
-    },
-    "precise": {
-        "displacement": _p("bdf", 1e-9, (2.8e-8, 2.6e-8), (0.40, 0.33)),
-        "natural": _p("rodas5p", 1e-7, (2.1e-8, 1.6e-8), (0.73, 1.04)),
-        "angle": _p("rodas5p", 1e-7, (2.3e-8, 1.5e-8), (0.43, 0.42)),
-        "tether": _p("rodas5p", 1e-6, (6.0e-8,), (0.11,)),
-        "other": _p("rodas5p", 1e-10, (1.7e-8,), (0.03,)),
-    },
-}
+def preset_targets(path=None) -> dict:
+    """The end-mass error each preset was chosen to reach, m."""
+    return {k: float(v) for k, v in _read(path)["targets_m"].items()}
+
+
+def preset_sources(path=None) -> dict:
+    """Per system, the results file the table's numbers come from and its stamp;
+    under ``"table"`` the stamp of the table's own write."""
+    data = _read(path)
+    return {**data["sources"], "table": data["stamp"]}
+
+
+ACCURACY_PRESETS = load_presets()
+PRESET_TARGETS = preset_targets()
+"""End-mass (or tracked-point) error each preset was chosen to reach, m."""
 
 
 def preset_system(model) -> str:

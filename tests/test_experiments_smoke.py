@@ -17,13 +17,11 @@ import importlib
 import importlib.util
 import math
 import os
-import sys
 
 import numpy as np
 import pytest
 
 
-EXPERIMENTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "experiments")
 HAS_SCIPY = importlib.util.find_spec("scipy") is not None
 HAS_SUNDAE = importlib.util.find_spec("sksundae") is not None
 HAS_MOORDYN = importlib.util.find_spec("moordyn") is not None
@@ -34,12 +32,10 @@ HAS_NUMBA = importlib.util.find_spec("numba") is not None
 def results_in_tmp(tmp_path_factory):
     old = os.environ.get("JAXSTRING_RESULTS_DIR")
     os.environ["JAXSTRING_RESULTS_DIR"] = str(tmp_path_factory.mktemp("results"))
-    sys.path.insert(0, EXPERIMENTS)
     import matplotlib
 
     matplotlib.use("Agg")
     yield os.environ["JAXSTRING_RESULTS_DIR"]
-    sys.path.remove(EXPERIMENTS)
     if old is None:
         del os.environ["JAXSTRING_RESULTS_DIR"]
     else:
@@ -59,8 +55,8 @@ def _files(results, stem):
 
 @pytest.mark.skipif(not HAS_SCIPY, reason="scipy (bench extra) not installed")
 def test_band_jacobian_equals_dense():
-    refs = _module("references")
     import jaxstring
+    from jaxstring.testing import references as refs
 
     for form in ("displacement", "natural", "angle"):
         scene = jaxstring.scenes.string_pendulum(formulation=form, k=5, EA=1e5)

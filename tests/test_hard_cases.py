@@ -9,19 +9,12 @@ failure; energy is conserved where alpha = 0; the unit-tangent constraint holds.
 """
 
 import math
-import os
-import sys
 
+import hard_cases
 import numpy as np
 import pytest
 
 import jaxstring as js
-
-
-sys.path.insert(
-    0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "experiments")
-)
-import hard_cases  # noqa: E402
 
 
 # (k, formulation, start, solver, EA, alpha) -> expected outcome, and for a success

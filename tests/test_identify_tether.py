@@ -2,18 +2,10 @@
 (experiments/identify_tether.py): data from a finer chain plus noise, fit with a
 coarser chain; c_n recovered within 5 % with a Gauss-Newton standard deviation."""
 
-import os
-import sys
-
+import identify_tether as it
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-
-sys.path.insert(
-    0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "experiments")
-)
-import identify_tether as it  # noqa: E402
 
 
 @pytest.mark.slow

@@ -1,4 +1,4 @@
-"""The strongest peers (experiments/peers.py) solve jaxstring's equations.
+"""The strongest peers (jaxstring/testing/peers.py) solve jaxstring's equations.
 
 peers.py is an independent NumPy/numba implementation of the string pendulum in the
 three formulations and of the lumped-mass tether; here each right-hand side and the
@@ -7,9 +7,6 @@ vector field (and jax.jacfwd of it) to 1e-12 relative, at states with slack and
 compressed elements where the tension-only law is on, and CVODE and scipy's Radau
 on the compiled functions agree on the motion. Skipped without the bench extra.
 """
-
-import pathlib
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -21,8 +18,7 @@ import jaxstring as js
 
 pytest.importorskip("numba")
 pytest.importorskip("sksundae")
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "experiments"))
-import peers  # noqa: E402
+from jaxstring.testing import peers
 
 
 K = 6

@@ -5,11 +5,8 @@ The presets (jaxstring/_presets.py) were measured at k = 40 over 2 s
 independent tight reference: a small string in displacement and (eps, phi) variables
 against Kvaerno5 at 1e-11 (a different solver from the presets'), and, slow-marked,
 the default scene against CVODE with the numba right-hand side of
-experiments/peers.py at 1e-11, where the presets must reach their targets.
+jaxstring/testing/peers.py at 1e-11, where the presets must reach their targets.
 """
-
-import pathlib
-import sys
 
 import numpy as np
 import pytest
@@ -60,8 +57,7 @@ def test_presets_reach_their_targets_on_the_default_scene(formulation):
     """The measurement behind the presets, repeated: k = 40, EA = 1e6, 2 s."""
     pytest.importorskip("numba")
     pytest.importorskip("sksundae")
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "experiments"))
-    import peers
+    from jaxstring.testing import peers
 
     scene = js.scenes.string_pendulum(formulation=formulation)
     peer = peers.make_rhs(formulation, 40, 1e6, alpha=0.01)

@@ -13,27 +13,23 @@ rise) with MoorDyn 2.7.2 and jaxstring's ExactTether and checks physics, not spe
 """
 
 import os
-import sys
 
 import numpy as np
 import pytest
 
 
 pytest.importorskip("moordyn")
-EXPERIMENTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "experiments")
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     old = os.environ.get("JAXSTRING_RESULTS_DIR")
     os.environ["JAXSTRING_RESULTS_DIR"] = str(tmp_path_factory.mktemp("results"))
-    sys.path.insert(0, EXPERIMENTS)
     try:
         import tether_moordyn
 
         rows, data = tether_moordyn.main(quick=True, methods=("exact",))
     finally:
-        sys.path.remove(EXPERIMENTS)
         if old is None:
             os.environ.pop("JAXSTRING_RESULTS_DIR")
         else:

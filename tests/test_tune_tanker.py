@@ -3,24 +3,16 @@
 respect to the gains against central finite differences, and a few optimiser steps
 lowering the cost on a short window and on a longer run it was not trained on."""
 
-import os
-import sys
-
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
+import tune_tanker as tt
 
 import jaxstring as js
 from jaxstring import _fit
 from jaxstring.tandem.scenes import tandem_controlled
-
-
-sys.path.insert(
-    0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "experiments")
-)
-import tune_tanker as tt  # noqa: E402
 
 
 GAINS = ("K_P", "K_D")

@@ -1,5 +1,6 @@
-"""The strongest peers: the string pendulum and the tether in NumPy/numba, integrated
-by CVODE (SUNDIALS, through scikit-sundae) and scipy's solve_ivp.
+"""Peers of the string pendulum and the tether, used by the tests and the benchmarks:
+the equations in NumPy/numba, integrated by CVODE (SUNDIALS, through scikit-sundae)
+and scipy's solve_ivp. They need the bench extra: ``pip install ".[bench]"``.
 
 An independent implementation of the equations (nothing here calls into jaxstring;
 tests/test_peers.py checks every right-hand side against jaxstring's vector field):
@@ -33,7 +34,7 @@ Use::
     out = cvode_solve(peer, ts, peer.initial_state(np.pi / 2), rtol=1e-8, atol=1e-8)
     end = peer.end_mass(out["ys"])  # (T, 2) end-mass positions, m
 
-numba and scikit-sundae are in the `bench` extra.
+numba (imported with this module) and scikit-sundae are in the `bench` extra.
 """
 
 import dataclasses
