@@ -123,7 +123,7 @@ def solver_block(EA, k, t1, names, rtol, atol, repeats, extra=None):
 
 def component_costs(k, EA=1e6, reps=200):
     """In-loop cost (us) of the pieces of an implicit step at k elements."""
-    scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, theta0=1.0)
+    scene = js.string_pendulum("displacement", k=k, EA=EA, theta0=1.0)
     y = scene.y0 + 1e-3 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
     fn = lambda u: scene.vector_field(0.0, u)
     n, b = y.shape
@@ -223,7 +223,7 @@ def main(
     # Scaling in k at EA = 1e6 (Rodas5P, CVODE).
     scal = []
     for kk in ks:
-        scene = js.scenes.string_pendulum("displacement", k=kk, EA=1e6, t1=t1)
+        scene = js.string_pendulum("displacement", k=kk, EA=1e6, t1=t1)
         ts = jnp.linspace(0.0, t1, 21)
         r = run_solver(scene, "rodas5p", ts, rtol, atol, 1 if kk > 160 else repeats)
         r.update(k=kk)

@@ -38,7 +38,7 @@ def child(solver, mode, k):
 
     if mode == "detected":
         _linalg.declared_width = lambda *a, **kw: None
-    mk = lambda EA, alpha, kk=k: js.scenes.string_pendulum(
+    mk = lambda EA, alpha, kk=k: js.string_pendulum(
         "displacement", k=kk, EA=EA, alpha=alpha, t1=2.0
     )
     warm = js.simulate(mk(1e4, 0.01, 3), "tsit5", n_save=3)  # JAX start-up

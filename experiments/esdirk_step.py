@@ -72,7 +72,7 @@ def main(quick=False, tols=None, repeats=None):
     ts = np.linspace(0.0, t1, 5)
     rows = []
     for form, EA in scenes:
-        scene = jaxstring.scenes.string_pendulum(formulation=form, k=k, EA=EA, t1=t1)
+        scene = jaxstring.string_pendulum(formulation=form, k=k, EA=EA, t1=t1)
         ref, _ = harness.reference(scene, ts, "rodas5p", 1e-11, max_steps=10**6)
         for tol in tols:
             for label, solver in _solvers(form, tol).items():

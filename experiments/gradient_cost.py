@@ -48,7 +48,7 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
     formulations = ("displacement",) if quick else ("displacement", "natural", "angle")
     adjoints = (("forward", None), ("recursive", "auto"), ("recursive", None))
     for form in formulations:
-        scene = js.scenes.string_pendulum(
+        scene = js.string_pendulum(
             formulation=form, k=k, EA=1e4, alpha=0.02, t1=t1
         )
         cfg = _fit.SolveConfig(rtol=1e-8, atol=1e-8, n_save=101)

@@ -90,7 +90,7 @@ N_SAVE = 201
 G = 9.81
 # Out-of-plane angular velocity of the natural 3D starts (rad/s): about x (the
 # hanging string swings out of the plane) and about the vertical (a released
-# string swings conically, as in tests/test_physics.py).
+# string swings conically, as in tests/pendulum/test_physics.py).
 OUT_OF_PLANE = (1.0, -2.0, 0.0)
 
 COLUMNS = [

@@ -295,7 +295,7 @@ class PendulumCase:
     def scene(self):
         import jaxstring
 
-        return jaxstring.scenes.string_pendulum(
+        return jaxstring.string_pendulum(
             formulation=self.formulation, k=self.k, EA=self.EA, alpha=self.alpha,
             t1=self.t1, y0=self.y0,
         )  # fmt: skip

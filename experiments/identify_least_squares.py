@@ -4,7 +4,7 @@ Question: how fast and how well does `jaxstring.least_squares` recover the dampi
 alpha and the stiffness EA from noisy end-mass positions, and are its reported
 standard deviations right? The data come from an independent implementation of the
 displacement-variable string (NumPy right-hand side and analytic Jacobian, scipy's
-Radau at rtol 1e-10: `tests/test_reference_scipy.py`), k = 16, EA = 1e3 N,
+Radau at rtol 1e-10: `tests/pendulum/test_reference_scipy.py`), k = 16, EA = 1e3 N,
 alpha = 0.05 s, l = mu l = m_s = 1, released horizontally, 2 s, 100 samples, with
 0.5 mm Gaussian noise on both coordinates. The fit starts 40 % off (alpha = 0.07 s,
 EA = 1.4e3 N). One fit is timed including compilation; then 20 noise seeds are

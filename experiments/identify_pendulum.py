@@ -43,11 +43,11 @@ from jaxstring import _fit
 
 def bounce_scene(formulation, k, alpha, EA, t1, eps0):
     """The string pendulum hanging at rest, stretched to `eps0`, released."""
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, theta0=0.0
     )
     y0 = base.y0.at[:, 0].set(eps0)  # column 0 is the strain in both natural forms
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, theta0=0.0, y0=y0
     )
 

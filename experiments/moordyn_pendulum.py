@@ -141,7 +141,7 @@ def jaxstring_scene(nodes0, t1):
     m_s = LINE["m_point"] + 0.5 * w * h
     r = np.asarray(nodes0[1:], dtype=np.float64)
     y0 = np.concatenate([r, np.zeros_like(r)], axis=1)
-    return jaxstring.scenes.string_pendulum(
+    return jaxstring.string_pendulum(
         formulation="displacement",
         k=k,
         EA=EA,

@@ -495,9 +495,9 @@ def preset_study(quick=False, systems=None, out_name=""):
             # 21 elements, over the still phase and the start of the rise (error:
             # the last element's position); each against Kvaerno5 at 1e-11.
             if system == "tandem":
-                scene = jaxstring.scenes.tandem_fishtail(t1=600.0 if quick else 3e3)
+                scene = jaxstring.tandem_fishtail(t1=600.0 if quick else 3e3)
             else:
-                scene = jaxstring.scenes.tether_fixed(
+                scene = jaxstring.tether_fixed(
                     N=11 if quick else 21, t1=12.0 if quick else 20.0
                 )
             ts = np.linspace(0.0, float(scene.t1), 5)

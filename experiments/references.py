@@ -33,7 +33,7 @@ def main(
 
     if quick:
         k, EA = 8, 1e4
-    scene = jaxstring.scenes.string_pendulum(formulation=formulation, k=k, EA=EA)
+    scene = jaxstring.string_pendulum(formulation=formulation, k=k, EA=EA)
     ts = np.linspace(float(scene.t0), float(scene.t1), 41)
     rhs = JaxRHS(scene)
     f_us, j_us = rhs.call_cost_us()

@@ -69,7 +69,7 @@ REPEAT_BUDGET_S = 10.0
 
 
 def scene(formulation, case, k, smoothing, t1=T1):
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation=formulation,
         k=k,
         alpha=0.01,
@@ -356,7 +356,7 @@ def gradient_study(quick=False):
     cases = GRADIENT_CASES[:1] if quick else GRADIENT_CASES
     rows = []
     for k, EA, t1 in cases:
-        sc = js.scenes.string_pendulum(
+        sc = js.string_pendulum(
             formulation="angle",
             k=k,
             EA=EA,

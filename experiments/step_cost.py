@@ -69,7 +69,7 @@ def _touch(tree):
 
 
 def pieces(k, n):
-    sc = jaxstring.scenes.string_pendulum(formulation="displacement", k=k, EA=1e6)
+    sc = jaxstring.string_pendulum(formulation="displacement", k=k, EA=1e6)
     y = sc.y0 + 0.01
     jac = lambda u, s: _linalg.jacobian(
         lambda v: s.vector_field(0.0, v), u, 1, second_order=2
@@ -121,7 +121,7 @@ class ZeroLoad(AbstractStringLoad):
 def simulate_per_step(k, t1):
     """Per-step wall time of a short release with the model's Jacobian and with
     the probed one (the same scene plus `ZeroLoad`), runs interleaved, best of 3."""
-    sc = jaxstring.scenes.string_pendulum(
+    sc = jaxstring.string_pendulum(
         formulation="displacement", k=k, EA=1e6, t1=t1
     )
     probed = eqx.tree_at(lambda s: s.effects, sc, sc.effects + (ZeroLoad(),))
@@ -166,7 +166,7 @@ def kernels_per_step(k, t1, solver):
     EA = 1e6, rtol = atol = 1e-7), counted in a profiler trace, and the wall time
     per attempt of the same run without the profiler (best of 3): their ratio is
     the mean cost of one kernel, launch included."""
-    sc = jaxstring.scenes.string_pendulum(
+    sc = jaxstring.string_pendulum(
         formulation="displacement", k=k, EA=1e6, t1=t1
     )
     ts = np.linspace(0.0, t1, 5)

@@ -399,7 +399,7 @@ STUDIES = (
         "pendulum_checks.py",
         "the measured numbers behind the string-pendulum tests",
         "1 min / 3 min",
-        (*PENDULUM, "tests/helpers.py", "tests/test_physics.py"),
+        (*PENDULUM, "tests/helpers.py", "tests/pendulum/test_physics.py"),
         (Run((), ("pendulum_checks.md",)),),
     ),
     Study(
@@ -534,7 +534,7 @@ STUDIES = (
         "identify_least_squares.py",
         "alpha and EA by least_squares from 0.5 mm noisy positions, 20 seeds",
         "2 min / 15 min",
-        (*PENDULUM, *FIT, "tests/test_reference_scipy.py"),
+        (*PENDULUM, *FIT, "tests/pendulum/test_reference_scipy.py"),
         (
             Run((), _files("identify_least_squares", ext=("md", "csv", "png"))),
             Run(("--adam",), _files("identify_least_squares_adam")),

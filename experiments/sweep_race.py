@@ -67,7 +67,7 @@ def race_k(k, members, solver, tols, cvode_tol, repeats, group, mode, peer_membe
     numba_s = peers.make_rhs("displacement", k, 1e6).warmup()
     refs, wall, _ = common.clock(lambda: _cvode_loop(k, picked, ts, 1e-10))
     print(f"k={k}: references in {wall:.1f} s", flush=True)
-    base = js.scenes.string_pendulum(k=k, EA=1e6, t1=2.0)
+    base = js.string_pendulum(k=k, EA=1e6, t1=2.0)
 
     def run_sweep(tol):
         res = sweep(base, {"alpha": alphas}, end_mass, solver=solver, rtol=tol,

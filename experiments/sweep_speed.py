@@ -82,7 +82,7 @@ def end_mass(traj, scene):
 
 
 def _scene(k, t1, **kw):
-    return js.scenes.string_pendulum(formulation="displacement", k=k, t1=t1, **kw)
+    return js.string_pendulum(formulation="displacement", k=k, t1=t1, **kw)
 
 
 def _loop(alphas, k, t1, kw):

@@ -40,7 +40,7 @@ def best(f, *a, n=100):
     return min(out)
 rows = []
 for k in ks:
-    sc = jaxstring.scenes.string_pendulum(k=k, EA=1e6)
+    sc = jaxstring.string_pendulum(k=k, EA=1e6)
     y = sc.y0 + 0.01
     f = lambda u: sc.vector_field(0.0, u)
     row = {"k": k, "rhs_us": best(jax.jit(f), y)}

@@ -7,7 +7,6 @@ from . import (
     chain as chain,
     lines as lines,
     pendulum as pendulum,
-    scenes as scenes,
     tandem as tandem,
     tether as tether,
 )

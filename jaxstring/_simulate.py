@@ -20,7 +20,8 @@ def simulate(
 
     **Arguments:**
 
-    - `scene`: a `Scene` (see `jaxstring.scenes`).
+    - `scene`: a `Scene` (a named scene such as `jaxstring.string_pendulum`, or one
+      built by hand).
     - `solver`: a name from `jaxstring.SOLVERS` (each with a one-line description
       there) or any `diffrax.AbstractSolver` instance. Adaptive implicit:
       `"kvaerno3"`, `"kvaerno4"`, `"kvaerno5"` (default), `"implicit_euler"`,

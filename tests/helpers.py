@@ -29,7 +29,7 @@ def run(
     """Simulate a string pendulum, saved at `n_save` points over [0, t1];
     `scene_options`: further arguments of `string_pendulum` (`theta0`, `mu`, `m_s`,
     `l`, `g`, `dim`, `effects`, ...). Cached on all arguments."""
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, **scene_options
     )
     ts = jnp.linspace(0.0, t1, n_save)

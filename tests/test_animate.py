@@ -86,7 +86,6 @@ def test_plot_modules_leave_the_backend_alone():
     code = (
         "import matplotlib; matplotlib.use('svg');"
         "import jaxstring.pendulum.plot, jaxstring.tether.plot, jaxstring.tandem.plot;"
-        "import jaxstring.plot, jaxstring.tether_plot, jaxstring.tanker_plot;"
         "print(matplotlib.get_backend())"
     )
     out = subprocess.run(

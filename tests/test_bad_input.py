@@ -37,7 +37,7 @@ def no_solve(monkeypatch):
 
 @functools.cache
 def pendulum():
-    return js.scenes.string_pendulum(k=4, t1=0.5)
+    return js.string_pendulum(k=4, t1=0.5)
 
 
 @functools.cache
@@ -191,93 +191,93 @@ CASES = [
     # -- scene builders
     (
         "pendulum-mu-nan",
-        lambda: js.scenes.string_pendulum(mu=NAN),
+        lambda: js.string_pendulum(mu=NAN),
         ["`mu`", "nan", "> 0"],
     ),
     (
         "pendulum-k-text",
-        lambda: js.scenes.string_pendulum(k="4"),
+        lambda: js.string_pendulum(k="4"),
         ["`k`", "'4'", "integer >= 2"],
     ),
     (
         "pendulum-effect-typo",
-        lambda: js.scenes.string_pendulum(effects="gravty"),
+        lambda: js.string_pendulum(effects="gravty"),
         ["effect", "'gravty'", "'gravity'"],
     ),
     (
         "tether-method",
-        lambda: js.scenes.tether_fixed(method="rk4"),
+        lambda: js.tether_fixed(method="rk4"),
         ["method", "'rk4'", "'aceam', 'exact', 'lms'"],
     ),
-    ("tether-d", lambda: js.scenes.tether_fixed(d=-0.01), ["`d`", "-0.01", "> 0"]),
+    ("tether-d", lambda: js.tether_fixed(d=-0.01), ["`d`", "-0.01", "> 0"]),
     (
         "tether-k_lms",
-        lambda: js.scenes.tether_fixed(method="lms", k_lms=-1.0),
+        lambda: js.tether_fixed(method="lms", k_lms=-1.0),
         ["`k_lms`", "-1.0", "> 0"],
     ),
     (
         "tether-area",
-        lambda: js.scenes.tether_fixed(tangential_area="wet"),
+        lambda: js.tether_fixed(tangential_area="wet"),
         ["tangential_area", "'wet'", "'projected', 'wetted'"],
     ),
     (
         "tether-released",
-        lambda: js.scenes.tether_fixed(N=6, released=(200.0,) * 5),
+        lambda: js.tether_fixed(N=6, released=(200.0,) * 5),
         ["`released`", "200", "L = 100"],
     ),
     (
         "tether-current",
-        lambda: js.scenes.tether_fixed(current=(1.0, 0.0)),
+        lambda: js.tether_fixed(current=(1.0, 0.0)),
         ["`velocity`", "(2,)", "(3,)"],
     ),
     (
         "winch-haul",
-        lambda: js.scenes.tether_winch(N=6, haul_speed=10.0),
+        lambda: js.tether_winch(N=6, haul_speed=10.0),
         ["`haul_speed`", "10.0", "<= 2.85714"],
     ),
     (
         "winch-payout",
-        lambda: js.scenes.tether_winch(N=6, payout_speed=1.0),
+        lambda: js.tether_winch(N=6, payout_speed=1.0),
         ["`payout_speed`", "1.0", "<= 0.5"],
     ),
     (
         "winch-times",
-        lambda: js.scenes.tether_winch(N=6, times=(0.0, 1.0)),
+        lambda: js.tether_winch(N=6, times=(0.0, 1.0)),
         ["`times`", "(0.0, 1.0)", "5 knots"],
     ),
     (
         "fpso-alone-turret",
-        lambda: js.scenes.tandem_fpso_alone(x_t_over_L=1.0),
+        lambda: js.tandem_fpso_alone(x_t_over_L=1.0),
         ["`x_t_over_L`", "1.0", "[-0.5, 0.5]"],
     ),
     (
         "equilibria-wind",
-        lambda: js.scenes.tandem_equilibria(V_w=-1.0),
+        lambda: js.tandem_equilibria(V_w=-1.0),
         ["`V_w`", "-1.0", ">= 0"],
     ),
     (
         "fishtail-hawser",
-        lambda: js.scenes.tandem_fishtail(hawser="rope"),
+        lambda: js.tandem_fishtail(hawser="rope"),
         ["hawser", "'rope'", "'massless', 'line'"],
     ),
     (
         "fishtail-line-option",
-        lambda: js.scenes.tandem_fishtail(hawser="line", line_options={"NN": 4}),
+        lambda: js.tandem_fishtail(hawser="line", line_options={"NN": 4}),
         ["`line_options`", "'NN'", "'mass_per_length'"],
     ),
     (
         "controlled-law",
-        lambda: js.scenes.tandem_controlled(law="C"),
+        lambda: js.tandem_controlled(law="C"),
         ["law", "'C'", "'A', 'B'"],
     ),
     (
         "controlled-offset",
-        lambda: js.scenes.tandem_controlled(shuttle_offset_deg=NAN),
+        lambda: js.tandem_controlled(shuttle_offset_deg=NAN),
         ["`shuttle_offset_deg`", "nan", "finite"],
     ),
     (
         "hopf-F_ast",
-        lambda: js.scenes.tandem_hopf(F_ast=NAN),
+        lambda: js.tandem_hopf(F_ast=NAN),
         ["`F_ast`", "nan", "finite"],
     ),
     # -- simulate
@@ -471,7 +471,7 @@ CASES = [
     (
         "value_and_grad-sensitivity-projects",
         lambda: js.value_and_grad(
-            js.scenes.string_pendulum(formulation="natural", k=4, t1=0.5),
+            js.string_pendulum(formulation="natural", k=4, t1=0.5),
             loss,
             ["EA"],
             adjoint="sensitivity",

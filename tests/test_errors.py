@@ -8,7 +8,7 @@ import jaxstring as js
 
 
 def pendulum(**kw):
-    return js.scenes.string_pendulum(**kw)
+    return js.string_pendulum(**kw)
 
 
 @pytest.mark.parametrize(

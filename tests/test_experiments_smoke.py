@@ -59,7 +59,7 @@ def test_band_jacobian_equals_dense():
     from jaxstring.testing import references as refs
 
     for form in ("displacement", "natural", "angle"):
-        scene = jaxstring.scenes.string_pendulum(formulation=form, k=5, EA=1e5)
+        scene = jaxstring.string_pendulum(formulation=form, k=5, EA=1e5)
         rhs = refs.JaxRHS(scene)
         rhs.compile()
         y = rhs.y0 + 1e-2 * np.random.default_rng(1).standard_normal(rhs.n)
@@ -147,7 +147,7 @@ def test_fig9_quick(results_in_tmp):
         assert 0 < k5[1] < 1.5 * k5[0], (form, k5)
     assert all(_files(results_in_tmp, "fig9_formulations_quick").values())
     # The formulation gap at the paper's settings is asserted on step counts in
-    # tests/test_formulation_gap.py.
+    # tests/pendulum/test_formulation_gap.py.
 
 
 @pytest.mark.skipif(not HAS_SUNDAE, reason="scikit-sundae (bench extra) not installed")

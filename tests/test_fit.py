@@ -24,9 +24,7 @@ def _end_loss(traj, scene):
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_gradient_matches_central_differences(formulation):
-    scene = js.scenes.string_pendulum(
-        formulation=formulation, k=4, EA=1e3, alpha=0.02, t1=0.3
-    )
+    scene = js.string_pendulum(formulation=formulation, k=4, EA=1e3, alpha=0.02, t1=0.3)
     kw = dict(rtol=1e-11, atol=1e-11, n_save=11)
     _, grad = _fit.value_and_grad(
         scene, _end_loss, ["alpha", "EA"], adjoint="forward", **kw
@@ -42,7 +40,7 @@ def test_gradient_matches_central_differences(formulation):
 def test_adjoints_agree_on_the_gradient():
     # Recursive checkpointing (default) and forward mode differentiate the same
     # discretisation: they agree to rounding, not only to the solver tolerance.
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation="displacement", k=4, EA=1e3, alpha=0.02, t1=0.3
     )
     kw = dict(rtol=1e-10, atol=1e-10, n_save=11)
@@ -59,11 +57,11 @@ def test_adjoints_agree_on_the_gradient():
 def _bounce(formulation, k, alpha, EA, t1, eps0=0.05):
     """The pendulum hanging at rest, stretched to `eps0`, released: the end mass
     bounces on the string (its frequency carries EA, its decay alpha)."""
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, theta0=0.0
     )
     y0 = base.y0.at[:, 0].set(eps0)  # column 0: strain, in both natural forms
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=alpha, t1=t1, theta0=0.0, y0=y0
     )
 
@@ -110,14 +108,14 @@ def test_identify_alpha_and_EA_from_a_finer_string():
 
 
 def test_fit_freezes_other_leaves_and_rejects_bad_input():
-    scene = js.scenes.string_pendulum(k=3, t1=0.1)
+    scene = js.string_pendulum(k=3, t1=0.1)
     spec = _fit.filter_spec(scene, [_fit.resolve(scene, "alpha")])
     assert sum(map(bool, __import__("jax").tree_util.tree_leaves(spec))) == 1
     with pytest.raises(ValueError, match="unknown parameter 'alfa'"):
         _fit.resolve(scene, "alfa")
     with pytest.raises(ValueError, match="must be > 0"):
         _fit.fit(
-            js.scenes.string_pendulum(k=3, t1=0.1, alpha=0.0),
+            js.string_pendulum(k=3, t1=0.1, alpha=0.0),
             lambda traj, s: 0.0,
             ["alpha"],
             steps=1,
@@ -132,7 +130,7 @@ def test_sensitivity_gradient_matches_central_differences(positive):
     # the gradient of the same loss as differentiating the solve (central
     # differences of the solve as the reference), in the parameters' own units and
     # in log units.
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation="displacement", k=4, EA=1e3, alpha=0.02, t1=0.3
     )
     kw = dict(rtol=1e-11, atol=1e-11, n_save=11)

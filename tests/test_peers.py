@@ -28,7 +28,7 @@ ALPHA = 0.02
 
 def _scene(form, slack):
     effects = ("gravity", "kelvin_voigt") + (("slack",) if slack else ())
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation=form, k=K, EA=EA, alpha=ALPHA, m_s=0.7, mu=1.3, l=1.1,
         theta0=1.1, effects=effects,
     )  # fmt: skip
@@ -108,7 +108,7 @@ def test_displacement_jacobian_matches_jacfwd(slack):
 
 
 def test_tether_rhs_matches_jaxstring_lms():
-    scene = js.scenes.tether_fixed(method="lms", N=9, c_lms=3.0, c_l=0.3)
+    scene = js.tether_fixed(method="lms", N=9, c_lms=3.0, c_l=0.3)
     peer = peers.make_tether(N=9, c_s=3.0, c_l=0.3)
     rng = np.random.default_rng(2)
     y0 = np.asarray(scene.y0, dtype=np.float64)

@@ -30,7 +30,7 @@ def _errors(scene, ts, ref_end):
 
 @pytest.mark.parametrize("formulation", ["displacement", "angle"])
 def test_presets_reach_their_targets_on_a_small_string(formulation):
-    scene = js.scenes.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
+    scene = js.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
     assert preset_system(scene.model) == formulation
     ts = np.linspace(0.0, 0.5, 5)
     ref = js.simulate(scene, "kvaerno5", rtol=1e-11, atol=1e-11, ts=ts)
@@ -44,9 +44,9 @@ def test_presets_reach_their_targets_on_a_small_string(formulation):
 
 
 def test_preset_systems():
-    tether = js.scenes.tether_fixed(N=5)
+    tether = js.tether_fixed(N=5)
     assert preset_system(tether.model) == "tether"
-    assert preset_system(js.scenes.tandem_fishtail(t1=10.0).model) == "other"
+    assert preset_system(js.tandem_fishtail(t1=10.0).model) == "other"
     with pytest.raises(ValueError, match="accuracy"):
         js.simulate(tether, accuracy="exact")
 
@@ -59,7 +59,7 @@ def test_presets_reach_their_targets_on_the_default_scene(formulation):
     pytest.importorskip("sksundae")
     from jaxstring.testing import peers
 
-    scene = js.scenes.string_pendulum(formulation=formulation)
+    scene = js.string_pendulum(formulation=formulation)
     peer = peers.make_rhs(formulation, 40, 1e6, alpha=0.01)
     ts = np.linspace(0.0, 2.0, 5)
     jac = "analytic" if peer.jac is not None else "dq"

@@ -34,7 +34,7 @@ KW = dict(rtol=1e-9, atol=1e-9, n_save=11)
 
 
 def test_sweep_matches_loop_of_simulate_calls():
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation="displacement", k=3, EA=1e3, alpha=0.02, t1=0.2
     )
     alphas = np.linspace(0.005, 0.05, 4)
@@ -42,7 +42,7 @@ def test_sweep_matches_loop_of_simulate_calls():
     res = sweep(base, {"alpha": alphas, "EA": EAs}, _end_and_tension, devices=1, **KW)
     assert res.ok.all(), res.status
     for i, (a, ea) in enumerate(zip(alphas, EAs)):
-        scene = js.scenes.string_pendulum(
+        scene = js.string_pendulum(
             formulation="displacement", k=3, EA=ea, alpha=a, t1=0.2
         )
         traj = js.simulate(scene, **KW)
@@ -55,7 +55,7 @@ def test_sweep_matches_loop_of_simulate_calls():
 
 
 def test_failed_member_leaves_the_others_intact():
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation="displacement", k=3, EA=1e3, alpha=0.02, t1=0.2
     )
     # Alone, the members need 101, 121 and 61 step attempts (simulate's defaults:
@@ -66,7 +66,7 @@ def test_failed_member_leaves_the_others_intact():
     assert res.ok.tolist() == [True, False, True], res.status
     assert "max_steps" in res.status[1] or "maximum" in res.status[1].lower()
     for i in (0, 2):
-        scene = js.scenes.string_pendulum(
+        scene = js.string_pendulum(
             formulation="displacement", k=3, EA=EAs[i], alpha=0.02, t1=0.2
         )
         ref = js.simulate(scene, max_steps=110, **KW)
@@ -84,7 +84,7 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
         import jaxstring as js
         from jaxstring._sweep import sweep
         assert len(jax.devices()) == 2
-        base = js.scenes.string_pendulum(k=3, EA=1e3, alpha=0.02, t1=0.2)
+        base = js.string_pendulum(k=3, EA=1e3, alpha=0.02, t1=0.2)
         fn = lambda traj, s: traj.obs["positions"][-1, -1, :]
         kw = dict(rtol=1e-9, atol=1e-9, n_save=11)
         v = {"alpha": [0.01, 0.02, 0.04], "EA": [1e3, 2e3]}
@@ -117,7 +117,7 @@ def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
         import jaxstring as js
         from jaxstring._sweep import sweep
         assert len(jax.devices()) == 2
-        base = js.scenes.string_pendulum(k=8, EA=1e6, t1=0.2)
+        base = js.string_pendulum(k=8, EA=1e6, t1=0.2)
         fn = lambda traj, s: traj.obs["positions"][:, -1, :]
         kw = dict(solver="bdf", rtol=1e-6, atol=1e-6, n_save=5, batch_size=16)
         v = {"alpha": np.linspace(0.005, 0.05, 32)}
@@ -139,7 +139,7 @@ def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
 
 
 def _pendulum(formulation="displacement", **kw):
-    return js.scenes.string_pendulum(formulation=formulation, k=3, t1=0.3, **kw)
+    return js.string_pendulum(formulation=formulation, k=3, t1=0.3, **kw)
 
 
 @pytest.mark.parametrize(
@@ -185,7 +185,7 @@ def test_lockstep_as_accurate_as_the_loop_against_a_tight_reference(formulation)
 
 
 def test_lockstep_failure_falls_back_to_one_solve_per_member():
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation="displacement", k=3, EA=1e3, alpha=0.02, t1=0.2
     )
     # Alone, the members need 101, 121 and 61 step attempts (simulate's defaults);
@@ -204,7 +204,7 @@ def test_lockstep_failure_falls_back_to_one_solve_per_member():
     assert res.mode == "lockstep, then vmap"
     assert res.ok.tolist() == [True, False, True], res.status
     for i in (0, 2):
-        scene = js.scenes.string_pendulum(
+        scene = js.string_pendulum(
             formulation="displacement", k=3, EA=EAs[i], alpha=0.02, t1=0.2
         )
         ref = js.simulate(scene, max_steps=110, **KW)
@@ -218,7 +218,7 @@ def test_batched_factor_equals_per_member_dense_solves(linear_solver):
     # I - h J(member) of a string (node-major, block-tridiagonal Jacobian):
     # the batched factor must solve every member's own dense system.
     scenes = [
-        js.scenes.string_pendulum(k=k_, EA=ea, alpha=a)
+        js.string_pendulum(k=k_, EA=ea, alpha=a)
         for k_, ea, a in [(12, 1e4, 0.01), (12, 1e6, 0.0), (12, 1e5, 0.05)]
     ]
     rng = np.random.default_rng(0)
@@ -271,7 +271,7 @@ def test_fixed_step_lockstep_equals_the_loop_to_rounding(solver):
     # converged: with a Newton tolerance of 1e-10 (quadratic convergence), to
     # rounding. Members of different stiffness and damping; groups of 2 over 3
     # members (a padded group), and the vmap mode, give the same numbers.
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation="displacement", k=4, EA=1e4, alpha=0.01, t1=0.3
     )
     alphas = np.array([0.0, 0.01, 0.05])
@@ -295,7 +295,7 @@ def test_fixed_step_lockstep_equals_the_loop_to_rounding(solver):
         assert res.ok.all(), res.status
     assert runs[0].mode == "lockstep"
     for i, (a, ea) in enumerate(zip(alphas, EAs)):
-        scene = js.scenes.string_pendulum(
+        scene = js.string_pendulum(
             formulation="displacement", k=4, EA=ea, alpha=a, t1=0.3
         )
         traj = js.simulate(scene, **kw)

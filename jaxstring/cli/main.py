@@ -70,13 +70,13 @@ def _pendulum_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _pendulum_build(a: argparse.Namespace):
-    from .. import scenes
+    from ..pendulum.scenes import DEFAULT_PENDULUM_EFFECTS, string_pendulum
 
     p = _pendulum_parameters(a)
-    effects = tuple(scenes.DEFAULT_PENDULUM_EFFECTS)
+    effects = tuple(DEFAULT_PENDULUM_EFFECTS)
     if p.pop("slack"):
         effects = effects + ("slack",)
-    return scenes.string_pendulum(**p, effects=effects)
+    return string_pendulum(**p, effects=effects)
 
 
 _PENDULUM_KEYS = "formulation k EA alpha l mu m_s g theta0 t1 slack".split()
@@ -122,9 +122,9 @@ def _tether_arguments(p: argparse.ArgumentParser) -> None:
 
 def _tether_build(name: str):
     def build(a: argparse.Namespace):
-        from .. import scenes
+        from .. import tether
 
-        return getattr(scenes, name)(
+        return getattr(tether, name)(
             method=a.method, N=a.N, t1=a.t1, smoothing=a.smoothing, k_lms=a.k_lms
         )
 

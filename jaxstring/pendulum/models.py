@@ -98,7 +98,7 @@ class AbstractString(AbstractModel):
         """Band 1 under jaxstring's own string effects (None: detect, under any
         other); the displacement string also has the (r, r') layout, its own
         Jacobian, and stiff directions that turn with the string (a Jacobian per
-        implicit stage and per BDF step). tests/test_fast_solvers.py checks the
+        implicit stage and per BDF step). tests/solvers/test_fast_solvers.py checks the
         band against detection and the Jacobian against the JVP-built one."""
         local = self._local(effects)
         if self.formulation != "displacement":

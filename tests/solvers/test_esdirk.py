@@ -16,7 +16,7 @@ from jaxstring._solvers.esdirk import ESDIRK
 from jaxstring._solvers.registry import build_solver
 from jaxstring._solvers.stage_newton import StageNewton
 
-from .helpers import assert_grad_matches_central_differences, fitted_order
+from ..helpers import assert_grad_matches_central_differences, fitted_order
 
 
 def _logistic(t, y, args):
@@ -55,7 +55,7 @@ def test_same_steps_as_diffrax_kvaerno(method):
     # The same tableau: with the stage solves converged to rounding, the
     # written-out step and diffrax's generic Runge-Kutta step give the same
     # solution over 300 constant steps of the stiff string.
-    sc = js.scenes.string_pendulum(formulation="angle", k=6, EA=1e6, t1=0.3)
+    sc = js.string_pendulum(formulation="angle", k=6, EA=1e6, t1=0.3)
     cls = {"kvaerno3": dfx.Kvaerno3, "kvaerno5": dfx.Kvaerno5}[method]
     theirs = cls(
         root_finder=StageNewton(rtol=1e-12, atol=1e-12), root_find_max_steps=10
@@ -89,12 +89,12 @@ def test_simulate_picks_the_written_out_solver_where_one_jacobian_serves_a_step(
         ("natural", ESDIRK),
         ("displacement", dfx.Kvaerno5),
     ):
-        sc = js.scenes.string_pendulum(formulation=form, k=4)
+        sc = js.string_pendulum(formulation=form, k=4)
         assert isinstance(build_solver("kvaerno5", 1e-6, 1e-6, sc), cls), form
 
 
 def test_agrees_with_rodas5p_reference_on_the_stiff_string():
-    sc = js.scenes.string_pendulum(formulation="angle", k=10, EA=1e9, t1=0.5)
+    sc = js.string_pendulum(formulation="angle", k=10, EA=1e9, t1=0.5)
     ts = np.linspace(0.0, 0.5, 3)
     ref = js.simulate(sc, "rodas5p", rtol=1e-11, atol=1e-11, ts=ts)
     errs = []
@@ -117,9 +117,7 @@ def _end_loss(traj, scene):
 
 def test_reverse_mode_gradient_matches_central_differences():
     # d(loss)/d(alpha, EA) through the stage solves (custom_root), reverse mode.
-    scene = js.scenes.string_pendulum(
-        formulation="angle", k=4, EA=1e3, alpha=0.02, t1=0.3
-    )
+    scene = js.string_pendulum(formulation="angle", k=4, EA=1e3, alpha=0.02, t1=0.3)
     kw = dict(rtol=1e-11, atol=1e-11, n_save=11, solver="kvaerno5")
     _, grad = _fit.value_and_grad(scene, _end_loss, ["alpha", "EA"], **kw)
     config = _fit.SolveConfig(**kw)

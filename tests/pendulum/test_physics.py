@@ -9,7 +9,7 @@ import scipy.optimize
 
 import jaxstring as js
 
-from .helpers import FORMULATIONS, fitted_order, run, zero_crossings
+from ..helpers import FORMULATIONS, fitted_order, run, zero_crossings
 
 
 G = 9.81
@@ -19,7 +19,7 @@ def _axial_mode_scene(formulation, k, EA, V, t1):
     """Vertical string, unstrained, with the first axial mode's velocity field."""
     mu = m_s = l = 1.0
     beta = scipy.optimize.brentq(lambda b: b * math.tan(b) - mu * l / m_s, 1e-6, 1.5)
-    base = js.scenes.string_pendulum(
+    base = js.string_pendulum(
         formulation=formulation, k=k, EA=EA, alpha=0.0, theta0=0.0, t1=t1, effects=()
     )
     y0 = np.array(base.y0)
@@ -29,7 +29,7 @@ def _axial_mode_scene(formulation, k, EA, V, t1):
     else:  # strain rate = d(axial velocity)/ds; column of eps' in the state
         col = 2 if formulation == "angle" else 3
         y0[:, col] = V * (beta / l) * np.cos(beta * s / l)
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation=formulation,
         k=k,
         EA=EA,
@@ -157,7 +157,7 @@ def test_hard_cases_integrate(formulation, case):
 
 
 def test_tangent_projection_prevents_drift():
-    scene = js.scenes.string_pendulum(formulation="natural", k=10, EA=1e6, t1=1.0)
+    scene = js.string_pendulum(formulation="natural", k=10, EA=1e6, t1=1.0)
     ts = jnp.linspace(0.0, 1.0, 101)
     raw = js.simulate(scene, rtol=1e-6, atol=1e-6, ts=ts, project=False)
     kept = js.simulate(scene, rtol=1e-6, atol=1e-6, ts=ts)
@@ -180,13 +180,13 @@ def test_three_d_out_of_plane_swing_conserves_energy_and_agrees():
     out = {}
     for formulation in ("displacement", "natural"):
         args = dict(formulation=formulation, k=10, EA=1e4, alpha=0.0, dim=3, t1=1.0)
-        y0 = np.array(js.scenes.string_pendulum(**args).y0)
+        y0 = np.array(js.string_pendulum(**args).y0)
         s = np.arange(11) / 10
         if formulation == "displacement":
             y0[:, 5] = 2.0 * s[1:]  # z-velocity of nodes, rigid rotation about y
         else:
             y0[:, 7] = 2.0  # dt/dt = omega x t: z-component of t'
-        scene = js.scenes.string_pendulum(**args, y0=jnp.asarray(y0))
+        scene = js.string_pendulum(**args, y0=jnp.asarray(y0))
         traj = js.simulate(scene, rtol=1e-9, atol=1e-9, ts=jnp.linspace(0, 1, 51))
         assert traj.ok, traj.status
         e = np.asarray(traj.energy)

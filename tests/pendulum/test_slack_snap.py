@@ -14,7 +14,7 @@ import pytest
 import jaxstring as js
 from jaxstring import _fit
 
-from .helpers import assert_grad_matches_central_differences
+from ..helpers import assert_grad_matches_central_differences
 
 
 EPS_S = 1e-3
@@ -71,7 +71,7 @@ def test_smoothing_is_checked():
     with pytest.raises(ValueError, match="smoothing"):
         js.Slack(smoothing=-1e-7)
     with pytest.raises(ValueError, match="slack_smoothing"):
-        js.scenes.string_pendulum(effects=("slack",), slack_smoothing=float("nan"))
+        js.string_pendulum(effects=("slack",), slack_smoothing=float("nan"))
 
 
 # The paper's hard case: EA = 1e8 N released from 3 pi/4 (free fall, then a snap),
@@ -81,7 +81,7 @@ TS = jnp.linspace(0.0, 2.0, 41)
 
 
 def _snap(formulation, smoothing):
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation=formulation,
         effects=("gravity", "kelvin_voigt", "slack"),
         slack_smoothing=smoothing,
@@ -133,7 +133,7 @@ def test_gradient_through_a_snap_matches_central_differences():
     # snaps at 0.54 s (1 kN, 50x the weight): the end-mass position at 0.6 s,
     # differentiated with respect to alpha and EA through the smoothed law, against
     # central differences.
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation="angle",
         k=4,
         EA=1e6,
@@ -157,7 +157,7 @@ def test_gradient_through_a_snap_matches_central_differences():
 
 
 def _snap_scene(t1):
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         formulation="angle",
         k=4,
         EA=1e6,

@@ -7,7 +7,7 @@ import pytest
 
 import jaxstring as js
 
-from .helpers import FORMULATIONS, count_eqns
+from ..helpers import FORMULATIONS, count_eqns
 
 
 def _vf_eqns(scene):
@@ -24,30 +24,30 @@ def _swinging_state(scene):
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_left_out_effect_is_not_computed_and_changes_nothing_else(formulation):
     kw = dict(formulation=formulation, k=6, EA=1e4, t1=0.1)
-    full = js.scenes.string_pendulum(
+    full = js.string_pendulum(
         effects=("gravity", "kelvin_voigt", "slack"), alpha=0.0, g=0.0, **kw
     )
-    y = _swinging_state(js.scenes.string_pendulum(**kw))
+    y = _swinging_state(js.string_pendulum(**kw))
     n_full = _vf_eqns(full)
     f_full = full.vector_field(0.0, y)
     for left_out in ("gravity", "kelvin_voigt", "slack"):
         names = tuple(e for e in ("gravity", "kelvin_voigt", "slack") if e != left_out)
-        part = js.scenes.string_pendulum(effects=names, alpha=0.0, g=0.0, **kw)
+        part = js.string_pendulum(effects=names, alpha=0.0, g=0.0, **kw)
         # Fewer operations in the compiled vector field ...
         assert _vf_eqns(part) < n_full, left_out
         # ... and, where the effect had no influence (g = 0, alpha = 0, taut
         # string), exactly the same vector field.
         np.testing.assert_array_equal(part.vector_field(0.0, y), f_full)
-    bare = js.scenes.string_pendulum(effects=(), **kw)
+    bare = js.string_pendulum(effects=(), **kw)
     assert _vf_eqns(bare) < min(
-        _vf_eqns(js.scenes.string_pendulum(effects=(e,), **kw))
+        _vf_eqns(js.string_pendulum(effects=(e,), **kw))
         for e in ("gravity", "kelvin_voigt", "slack")
     )
 
 
 def test_gravity_is_uniform_acceleration_at_release():
     # Straight, unstrained, at rest: no tension, so every mass falls with g.
-    scene = js.scenes.string_pendulum(formulation="displacement", k=8, t1=0.1)
+    scene = js.string_pendulum(formulation="displacement", k=8, t1=0.1)
     dy = scene.vector_field(0.0, scene.y0)
     np.testing.assert_allclose(dy[:, 2], 0.0, atol=1e-12)
     np.testing.assert_allclose(dy[:, 3], -9.81, rtol=1e-12)
@@ -70,7 +70,7 @@ def test_kelvin_voigt_and_slack_laws():
 
 
 def test_slack_string_has_zero_tension_where_compressed():
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation="displacement", k=6, effects=("gravity", "slack"), t1=0.1
     )
     y = np.array(scene.y0)
@@ -85,7 +85,7 @@ def test_same_structure_does_not_recompile_for_new_parameter_values():
 
     before = _integrate.jit_solve.cache_size()
     for EA, alpha in ((1e4, 0.01), (2e4, 0.0), (3e4, 0.05)):
-        scene = js.scenes.string_pendulum(k=5, EA=EA, alpha=alpha, t1=0.05)
+        scene = js.string_pendulum(k=5, EA=EA, alpha=alpha, t1=0.05)
         assert js.simulate(scene, ts=jnp.linspace(0, 0.05, 3)).ok
     assert _integrate.jit_solve.cache_size() - before <= 1
 
@@ -101,8 +101,8 @@ def _system_scenes():
 def _foreign_effects():
     """One effect of each system (the system it belongs to, the effect)."""
     return {
-        "pendulum": js.pendulum.Gravity(),
-        "tether": js.tether.Drag(),
+        "pendulum": js.pendulum.KelvinVoigt(),
+        "tether": js.tether.Drag(Cd=1.0, CdAx=0.1),
         "tandem": js.tandem.LinearDamping(),
     }
 

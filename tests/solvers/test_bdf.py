@@ -14,7 +14,7 @@ from scipy.integrate import solve_ivp
 import jaxstring as js
 from jaxstring._solvers.bdf import BDF
 
-from .helpers import fitted_order
+from ..helpers import fitted_order
 
 
 # ---------------------------------------------------------------------------
@@ -122,7 +122,7 @@ def test_fixed_step_order_two():
 def _pendulum(EA, t1, k=8):
     """Scene and 26 save times: every pendulum test has the same shapes, so the
     compiled `simulate` of each solver is shared (EA and t1 are leaves)."""
-    scene = js.scenes.string_pendulum("displacement", k=k, EA=EA, t1=t1)
+    scene = js.string_pendulum("displacement", k=k, EA=EA, t1=t1)
     return scene, jnp.linspace(0.0, t1, 26)
 
 
@@ -188,7 +188,7 @@ def test_steps_comparable_to_scipy_bdf():
 
 def _end_y(g, solver="bdf"):
     """End-mass height at 0.2 s as a function of gravity g (about -g t^2 / 2)."""
-    base = js.scenes.string_pendulum("displacement", k=4, EA=1e4, t1=0.2)
+    base = js.string_pendulum("displacement", k=4, EA=1e4, t1=0.2)
     scene = eqx.tree_at(lambda s: s.env.g, base, g)
     ts = jnp.array([0.0, 0.2])
     traj = js.simulate(scene, solver, rtol=1e-10, atol=1e-10, ts=ts)
@@ -257,7 +257,7 @@ def _moordyn_pendulum(k=10, t1=20.0):
         * (l * stretch / d)
     )
     y0 = np.concatenate([r, np.zeros_like(r)], axis=1)
-    return js.scenes.string_pendulum(
+    return js.string_pendulum(
         k=k,
         EA=EA,
         alpha=alpha,
@@ -296,7 +296,7 @@ def _final_refresh_count(formulation, skip_after, reuse=True):
     from jaxstring._scene import scene_vector_field
     from jaxstring._solvers import bdf as _bdf
 
-    scene = js.scenes.string_pendulum(formulation, k=8, EA=1e6, t1=0.3)
+    scene = js.string_pendulum(formulation, k=8, EA=1e6, t1=0.3)
     old = _bdf._SKIP_STORED_AFTER
     _bdf._SKIP_STORED_AFTER = skip_after  # read at trace time
     try:

@@ -19,7 +19,7 @@ from jaxstring._solvers.stage_newton import StageNewton
 from jaxstring.pendulum.effects import AbstractStringLoad, Loads
 from jaxstring.pendulum.models import DisplacementString
 
-from .helpers import (
+from ..helpers import (
     FORMULATIONS,
     assert_grad_matches_central_differences,
     fitted_order,
@@ -152,7 +152,7 @@ def test_rodas5p_dense_output_order():
 
 
 def _string_vf(formulation, k):
-    scene = js.scenes.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
+    scene = js.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
     y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
     return (lambda u, s: s.vector_field(0.0, u)), y, scene
 
@@ -239,7 +239,7 @@ def test_block_inverse_pivots():
 
 @functools.cache
 def _reference(formulation, k, EA, t1):
-    scene = js.scenes.string_pendulum(formulation, k=k, EA=EA, t1=t1)
+    scene = js.string_pendulum(formulation, k=k, EA=EA, t1=t1)
     ts = jnp.linspace(0.0, t1, 5)
     return js.simulate(scene, "kvaerno5", rtol=1e-11, atol=1e-11, ts=ts)
 
@@ -251,7 +251,7 @@ def _err(traj, ref):
 @pytest.mark.parametrize("formulation", ("displacement", "angle"))
 def test_rodas5p_agrees_with_kvaerno5_reference(formulation):
     ref = _reference(formulation, 6, 1e4, 0.4)
-    scene = js.scenes.string_pendulum(formulation, k=6, EA=1e4, t1=0.4)
+    scene = js.string_pendulum(formulation, k=6, EA=1e4, t1=0.4)
     traj = js.simulate(scene, "rodas5p", rtol=1e-8, atol=1e-8, ts=ref.ts)
     assert traj.ok, traj.status
     assert _err(traj, ref) < 1e-6, _err(traj, ref)
@@ -260,7 +260,7 @@ def test_rodas5p_agrees_with_kvaerno5_reference(formulation):
 @pytest.mark.parametrize("solver", ("theta", "newmark"))
 def test_fixed_step_solvers_second_order_on_string(solver):
     ref = _reference("displacement", 6, 1e4, 0.4)
-    scene = js.scenes.string_pendulum("displacement", k=6, EA=1e4, t1=0.4)
+    scene = js.string_pendulum("displacement", k=6, EA=1e4, t1=0.4)
     dts = (0.004, 0.002, 0.001)
     errs = []
     for dt in dts:
@@ -276,7 +276,7 @@ def test_fixed_step_solvers_second_order_on_string(solver):
 def test_fixed_step_paper_setting_runs(solver):
     # The paper's setting: dt = 0.005, 400 steps over 2 s, EA = 1e6. Measured
     # end-mass error against Rodas5P at 1e-9: 5.2e-3 m (implicit Euler: 0.24 m).
-    scene = js.scenes.string_pendulum("displacement", k=10, EA=1e6, t1=2.0)
+    scene = js.string_pendulum("displacement", k=10, EA=1e6, t1=2.0)
     ts = jnp.linspace(0.0, 2.0, 9)
     ref = js.simulate(scene, "rodas5p", rtol=1e-9, atol=1e-9, ts=ts)
     traj = js.simulate(scene, solver, dt0=0.005, rtol=1e-7, atol=1e-7, ts=ts)
@@ -300,7 +300,7 @@ def test_newton_refresh_removes_displacement_rejections():
     # contracts at a rate near 1 (the stiff axial force turns with the string), so
     # nearly every larger step failed in Newton. Refreshing the Jacobian at the
     # iterate removes most attempts, at the same answer.
-    scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
+    scene = js.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
     runs = {r: _kvaerno5(scene, ts, refresh=r) for r in (False, True)}
     attempts = {r: int(t.stats["num_steps"]) for r, t in runs.items()}
@@ -315,7 +315,7 @@ def test_refresh_before_predicted_divergence():
     # Jacobians) failed the step, refreshing first lets it converge: about 2.8x
     # fewer step attempts (362 -> 130 here; k = 40, 2 s: 21k -> 8.9k accepted steps,
     # docs, numerics), the same answer.
-    scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
+    scene = js.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
     runs = {
         "old": _kvaerno5(scene, ts, refresh_when_hopeless=False, max_jacobians=3),
@@ -334,7 +334,7 @@ def test_stage_jacobians_cut_kvaerno5_attempts():
     # step size is held down by Newton failures. jaxstring's Kvaerno5 takes it at
     # each stage's predictor: fewer attempts, the same answer (here 130 -> 30;
     # k = 40, 2 s: 9757 -> 3797 attempts; docs, numerics).
-    scene = js.scenes.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
+    scene = js.string_pendulum("displacement", k=8, EA=1e9, t1=0.2)
     ts = jnp.linspace(0.0, 0.2, 3)
     runs = {
         "step": _kvaerno5(scene, ts, cls=dfx.Kvaerno5),
@@ -379,7 +379,7 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
     # the declaration must be what probing finds, with every string effect on.
     from jaxstring._scene import scene_vector_field
 
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         formulation=formulation,
         k=12,
         dim=dim,
@@ -405,7 +405,7 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
     # it: the velocity-reduced solve must be backward stable and equal the
     # (refined) dense one to within the conditioning of I - c A_v - c^2 A_x
     # (c^2 EA k^2 / (mu l^2) ~ 1e6 at c = 0.1: forward errors ~ 1e-10).
-    scene = js.scenes.string_pendulum(
+    scene = js.string_pendulum(
         k=11, dim=dim, EA=1e6, effects=("gravity", "kelvin_voigt", "slack")
     )
     rng = np.random.default_rng(dim)
@@ -436,9 +436,7 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
 def test_declared_second_order_matches_the_jacobian():
     # DisplacementString declares rows (r, r') with dr/dt = r' exactly: the q rows
     # of its Jacobian are [0, I] and touch no other node, with every effect on.
-    scene = js.scenes.string_pendulum(
-        k=7, dim=2, effects=("gravity", "kelvin_voigt", "slack")
-    )
+    scene = js.string_pendulum(k=7, dim=2, effects=("gravity", "kelvin_voigt", "slack"))
     y = scene.y0 + 0.01
     n, b = y.shape
     J = np.asarray(
@@ -451,14 +449,14 @@ def test_declared_second_order_matches_the_jacobian():
         expect[i, :, i, 2:] = np.eye(2)
     assert np.array_equal(J[:, :2], expect)
     # The natural variables declare nothing.
-    nat = js.scenes.string_pendulum("angle", k=7)
+    nat = js.string_pendulum("angle", k=7)
     assert nat.structure.second_order == 0
 
 
 def test_second_order_factor_refuses_a_wrong_structure():
     # A relation whose q rows couple nodes (not a I + b J of dq/dt = v) gives a NaN
     # factor, so the Newton iteration fails instead of converging to a wrong root.
-    scene = js.scenes.string_pendulum(k=9)
+    scene = js.string_pendulum(k=9)
     fn = lambda u: scene.vector_field(0.0, u) + 0.1 * jnp.roll(u, 1, axis=0)
     y = scene.y0 + 0.01
     fac = _linalg.factor(
@@ -512,7 +510,7 @@ def test_model_jacobian_equals_autodiff(dim, effects):
     # Random states with stretched, compressed (slack: no force) and moving
     # elements: the written-out element derivatives equal jacfwd of the vector
     # field to rounding.
-    scene = js.scenes.string_pendulum(k=9, dim=dim, EA=1e6, effects=effects)
+    scene = js.string_pendulum(k=9, dim=dim, EA=1e6, effects=effects)
     rng = np.random.default_rng(dim + len(effects))
     y = scene.y0 + 0.05 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     eps, _ = scene.model.strain(y)
@@ -535,7 +533,7 @@ def test_model_jacobian_equals_autodiff(dim, effects):
 def test_model_jacobian_factor_equals_dense_solve(a, b):
     # BDF's I - c J and Rodas5P's I / (h gamma) - J, factorised straight from the
     # model's v rows: backward stable, and equal to the dense solve.
-    scene = js.scenes.string_pendulum(k=11, EA=1e6)
+    scene = js.string_pendulum(k=11, EA=1e6)
     rng = np.random.default_rng(5)
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     fac = _linalg.factor(
@@ -576,7 +574,7 @@ def test_solvers_with_the_model_jacobian_equal_the_probed_one(solver, monkeypatc
 
     monkeypatch.setattr(DisplacementString, "vf_jacobian", spy)
     ref = _reference("displacement", 14, 1e4, 0.3)
-    scene = js.scenes.string_pendulum("displacement", k=14, EA=1e4, t1=0.3)
+    scene = js.string_pendulum("displacement", k=14, EA=1e4, t1=0.3)
     probed = eqx.tree_at(lambda s: s.effects, scene, scene.effects + (ZeroLoad(),))
     # Every other save time of the reference: a new shape, so that this solve is
     # traced here (a Kvaerno5 run would otherwise reuse the reference's compiled
@@ -602,7 +600,7 @@ def test_rodas5p_gradient_through_the_model_jacobian():
     # Rodas5P's stages use J itself, so a gradient of the solution differentiates
     # the model's Jacobian (dN/d eps and dN/d eps_dot of the laws, to second
     # order): forward-mode gradients against central differences, k = 12 (banded).
-    scene = js.scenes.string_pendulum(k=12, EA=1e3, alpha=0.02, t1=0.2)
+    scene = js.string_pendulum(k=12, EA=1e3, alpha=0.02, t1=0.2)
     config = _fit.SolveConfig(solver="rodas5p", rtol=1e-10, atol=1e-10, n_save=5)
     end = lambda traj, s: jnp.sum(traj.obs["positions"][:, -1, :] ** 2)
     _, grad = _fit.value_and_grad(
@@ -627,7 +625,7 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     # Newton iteration fails instead of using the wrong Jacobian.
     from jaxstring._solvers.stage_newton import _stage_model_jacobian
 
-    scene = js.scenes.string_pendulum(k=14, EA=1e4)
+    scene = js.string_pendulum(k=14, EA=1e4)
     rng = np.random.default_rng(7)
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     f = jnp.asarray(rng.standard_normal(y.shape))
@@ -646,7 +644,7 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     assert np.all(np.isnan(np.asarray(bad.to_dense())[:, 4:]))
     # Not a stage relation, or a model without its own Jacobian: None.
     assert _stage_model_jacobian(f, args[:7]) is None
-    angle = js.scenes.string_pendulum("angle", k=14)
+    angle = js.string_pendulum("angle", k=14)
     assert (
         _stage_model_jacobian(angle.y0, args[:5] + (angle.y0, angle, args[7])) is None
     )

@@ -38,7 +38,7 @@ from jaxstring.tether import (
 )
 from jaxstring.tether.models import _aceam_solve, thomas
 
-from .helpers import count_eqns
+from ..helpers import count_eqns
 
 
 G = 9.81

@@ -20,7 +20,7 @@ TS = jnp.linspace(0.0, T1, 51)
 
 @functools.cache
 def _reference():
-    sc = js.scenes.string_pendulum("displacement", k=K, EA=EA, t1=T1)
+    sc = js.string_pendulum("displacement", k=K, EA=EA, t1=T1)
     ref = js.simulate(sc, "rodas5p", rtol=1e-11, atol=1e-11, ts=TS, max_steps=10**6)
     assert ref.ok
     return sc, np.asarray(ref.end_mass)
@@ -84,6 +84,6 @@ def test_make_controller_choice():
     pid = make_controller("kvaerno5", 1e-6, 1e-6, step_control="pid")
     assert type(pid) is dfx.PIDController
     assert isinstance(make_controller("theta", 1e-6, 1e-6, False), dfx.ConstantStepSize)
-    sc = js.scenes.string_pendulum("displacement", k=3, EA=1e4, t1=0.1)
+    sc = js.string_pendulum("displacement", k=3, EA=1e4, t1=0.1)
     with pytest.raises(ValueError, match="step_control"):
         js.simulate(sc, step_control="fast")

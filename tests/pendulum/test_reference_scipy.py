@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from .helpers import run
+from ..helpers import run
 
 
 K = 10

@@ -27,7 +27,7 @@ import pytest
 import jaxstring as js
 from jaxstring import lines
 
-from .helpers import central_differences
+from ..helpers import central_differences
 
 
 G = 9.80665  # MoorDyn's gravity, the decks' default

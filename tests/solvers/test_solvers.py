@@ -8,7 +8,7 @@ import pytest
 import jaxstring as js
 from jaxstring._solvers.fixed_step import _newton
 
-from .helpers import fitted_order, run
+from ..helpers import fitted_order, run
 
 
 def _err(traj, ref):
@@ -45,7 +45,7 @@ def test_adaptive_solvers_agree_with_reference(solver, tol):
 def test_fixed_step_implicit_euler_paper_setting_first_order():
     # The paper's fixed step dt = 0.005 (400 steps over 2 s) must run, and the
     # error must fall like dt.
-    scene = js.scenes.string_pendulum(k=10, EA=1e4, t1=0.4)
+    scene = js.string_pendulum(k=10, EA=1e4, t1=0.4)
     ts = jnp.linspace(0.0, 0.4, 5)
     ref = js.simulate(scene, rtol=1e-11, atol=1e-11, ts=ts)
     dts = (0.005, 0.0025, 0.00125)
@@ -60,7 +60,7 @@ def test_fixed_step_implicit_euler_paper_setting_first_order():
     order = fitted_order(dts, errs)
     assert 0.8 < order < 1.3, (order, errs)
     paper = js.simulate(
-        js.scenes.string_pendulum(k=10, EA=1e6, t1=2.0),
+        js.string_pendulum(k=10, EA=1e6, t1=2.0),
         "implicit_euler_fixed",
         dt0=0.005,
         rtol=1e-7,
@@ -95,7 +95,7 @@ def test_stage_newton_avoids_veryChord_early_divergence():
     # diffrax 0.7.2's VeryChord declares divergence whenever Newton has not met its
     # tolerance after two iterations, so it rejects many steps that a contracting
     # iteration would have accepted. jaxstring's StageNewton keeps iterating.
-    scene = js.scenes.string_pendulum(k=6, EA=1e4, t1=0.5)
+    scene = js.string_pendulum(k=6, EA=1e4, t1=0.5)
     ts = jnp.linspace(0.0, 0.5, 11)
     released = js.simulate(scene, dfx.Kvaerno5(), rtol=1e-6, atol=1e-6, ts=ts)
     ours = js.simulate(scene, "kvaerno5", rtol=1e-6, atol=1e-6, ts=ts)
@@ -118,7 +118,7 @@ def test_fixed_step_newton_variants_solve_the_same_steps(formulation):
     # (the iteration error), far below implicit Euler's own error at dt = 0.005.
     # The same holds for the Newton start: extrapolated from the previous step's
     # increment (the default) or zero.
-    scene = js.scenes.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
+    scene = js.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
     out = {}
     for newton, extrapolate in (("full", True), ("chord", True), ("full", False)):
         solver = js.ThetaMethod(
