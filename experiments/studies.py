@@ -52,19 +52,21 @@ SOLVE = (
     "jaxstring/_solvers",
     "jaxstring/_linalg",
     "jaxstring/_simulate.py",
+    "jaxstring/_integrate.py",
+    "jaxstring/_solve_config.py",
     "jaxstring/_model.py",
     "jaxstring/_scene.py",
     "jaxstring/_effect.py",
     "jaxstring/_jit.py",
     "jaxstring/_trajectory.py",
 )
-PENDULUM = (*SOLVE, "jaxstring/pendulum")
+PENDULUM = (*SOLVE, "jaxstring/pendulum", "jaxstring/chain/effects.py")
 PEERS = ("jaxstring/testing/peers.py",)
 CALLBACKS = ("jaxstring/testing/references.py",)
-TETHER = (*SOLVE, "jaxstring/tether")
-TANDEM = (*SOLVE, "jaxstring/tandem")
+TETHER = (*SOLVE, "jaxstring/tether", "jaxstring/chain")
+TANDEM = (*SOLVE, "jaxstring/tandem", "jaxstring/chain")
 FIT = ("jaxstring/_fit.py", "jaxstring/_least_squares.py", "jaxstring/_sensitivity.py")
-LINES = (*SOLVE, "jaxstring/lines")
+LINES = (*SOLVE, "jaxstring/lines", "jaxstring/chain")
 
 _RACE_PARTS = ("displacement_1e6", "displacement_1e9", "angle_1e6", "angle_1e9")
 _SCALING = (
@@ -539,6 +541,14 @@ STUDIES = (
             Run((), _files("identify_least_squares", ext=("md", "csv", "png"))),
             Run(("--adam",), _files("identify_least_squares_adam")),
         ),
+    ),
+    Study(
+        "solve_defaults",
+        "solve_defaults.py",
+        "the identification defaults: least squares at rtol 1e-6, 1e-7, 1e-8",
+        "3 min / 8 min",
+        (*PENDULUM, *FIT, "tests/pendulum/test_reference_scipy.py"),
+        (Run((), _files("solve_defaults")),),
     ),
     Study(
         "identify_tandem",
