@@ -15,6 +15,8 @@ import os
 
 import jax
 
+from ._config import ensure_compilation_cache
+
 
 @contextlib.contextmanager
 def one_blas_thread():
@@ -33,10 +35,12 @@ def one_blas_thread():
 
 def single_blas_thread(fn):
     """`fn` run under `one_blas_thread`, its JAX outputs computed before the limit
-    is lifted (JAX dispatches asynchronously)."""
+    is lifted (JAX dispatches asynchronously); the compilation cache decided first
+    (`jaxstring._config.ensure_compilation_cache`)."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
+        ensure_compilation_cache()
         with one_blas_thread():
             return jax.block_until_ready(fn(*args, **kwargs))
 

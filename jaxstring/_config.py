@@ -5,12 +5,13 @@
 * OpenBLAS threads are limited inside jaxstring's own calls only
   (`jaxstring._blas`); XLA:CPU's YNNPACK fusions are turned off per compilation
   for the solves (``jaxstring._jit``).
+* At jaxstring's first solve (not on import), JAX's persistent compilation cache
+  is turned on in a per-user folder unless the user configured it or set
+  ``JAXSTRING_CACHE=off`` (`enable_compilation_cache`), so that a second process
+  solving a scene of the same structure skips tracing and compiling it.
 * The ``jaxstring`` command (and only it) runs with equinox's ``EQX_ON_ERROR=nan``
-  unless the variable is set: equinox's runtime checks (in diffrax, lineax and
-  optimistix) otherwise compile to host callbacks, and JAX does not write a
-  program with host callbacks to its persistent compilation cache. A failed check
-  then yields NaN data, which the solve's status reports. `enable_compilation_cache`
-  tells API users the same.
+  unless the variable is set: a failed runtime check of diffrax, lineax or
+  optimistix then yields NaN data, which the solve's status reports.
 """
 
 import os
@@ -37,30 +38,28 @@ def default_cache_dir() -> str:
     return os.path.join(base, "jaxstring", "jax")
 
 
+_CACHE = {"state": None}  # None: not yet decided; else the folder or "off"
+
+
 def enable_compilation_cache(
     path: str | None = None,
     min_compile_s: float = 0.5,
-    warn: bool = True,
-    programs: bool = False,
+    programs: bool = True,
 ):
     """Turn on JAX's persistent compilation cache: compiled programs that took at
     least `min_compile_s` to compile are written to `path` (default
-    `default_cache_dir()`) and read back by later processes, so a second run of
-    the same scene skips its compilation. Returns the folder.
+    `default_cache_dir()`) and read back by later processes, so a second process
+    that solves a scene of the same structure skips its compilation. With
+    `programs` (default), `simulate`'s traced solves are saved too (in
+    `path`/programs), so that process skips tracing as well (see
+    `jaxstring._programs`). Returns the folder.
 
-    JAX does not cache a program that contains host callbacks, and equinox's
-    runtime checks compile to host callbacks unless ``EQX_ON_ERROR=nan`` (or
-    ``off``) is set in the environment before equinox is imported: set it before
-    importing jaxstring (the ``jaxstring`` command does), or the solves are not
-    cached (a `UserWarning` says so unless `warn=False`).
-
-    `programs=True` also saves `simulate`'s traced solves (in `path`/programs), so
-    a later process skips tracing too (what that saves: docs/performance.md,
-    "Compile time"). Loaded programs serve forward solves only (`fit` and `sweep`
-    trace as before); see `jaxstring._programs` for what keys a saved program.
+    jaxstring does this itself at its first solve, unless JAX's cache was already
+    configured (then it is left as it is) or ``JAXSTRING_CACHE=off`` is set; call
+    it to choose another folder. `disable_compilation_cache` turns it off. JAX's
+    cache is process-wide: from then on it also keeps the user's own programs that
+    take `min_compile_s` or more to compile.
     """
-    import warnings
-
     path = path or default_cache_dir()
     if not (isinstance(min_compile_s, (int, float)) and min_compile_s >= 0):
         raise ValueError(
@@ -73,11 +72,34 @@ def enable_compilation_cache(
     from . import _programs
 
     _programs.set_program_folder(os.path.join(path, "programs") if programs else None)
-    if warn and os.environ.get("EQX_ON_ERROR") not in ("nan", "off"):
-        warnings.warn(
-            "jaxstring's solves are not written to the compilation cache unless "
-            "EQX_ON_ERROR=nan is set before importing jaxstring (equinox's runtime "
-            "checks compile to host callbacks, which JAX does not cache).",
-            stacklevel=2,
-        )
+    _CACHE["state"] = path
     return path
+
+
+def disable_compilation_cache():
+    """Stop jaxstring from saving and loading compiled and traced solves (JAX's
+    compilation cache stays as the user configured it)."""
+    from . import _programs
+
+    _programs.set_program_folder(None)
+    if _CACHE["state"] not in (None, "off"):
+        jax.config.update("jax_compilation_cache_dir", None)
+    _CACHE["state"] = "off"
+
+
+def ensure_compilation_cache():
+    """At jaxstring's first solve: the persistent compilation cache on in
+    `default_cache_dir()`, unless ``JAXSTRING_CACHE=off``, the user configured
+    JAX's cache, or `disable_compilation_cache` was called."""
+    if _CACHE["state"] is not None:
+        return
+    if os.environ.get("JAXSTRING_CACHE", "").lower() in ("off", "0", "false", "no"):
+        _CACHE["state"] = "off"
+        return
+    if jax.config.jax_compilation_cache_dir:  # the user's own setting
+        _CACHE["state"] = jax.config.jax_compilation_cache_dir
+        return
+    try:
+        enable_compilation_cache()
+    except OSError:  # a read-only or missing home: solve without the cache
+        _CACHE["state"] = "off"

@@ -18,11 +18,16 @@ from . import _programs
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
 from ._solve_config import SolveConfig
-from ._solvers.diffrax_compat import result_code, result_from_code
+from ._solvers.diffrax_compat import (
+    result_code,
+    result_from_code,
+    save_times_checked,
+)
 from ._solvers.projected import ProjectedSolver
 from ._solvers.registry import build_solver
 from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
+from ._validate import check_times
 
 
 def solver_parts(scene: Scene, config: SolveConfig, norm=None):
@@ -60,28 +65,31 @@ def integrate(
 ):
     """Integrate dy/dt = `vector_field(t, y, args)` from `y0` over [t0, t1]: the
     one `diffeqsolve` of the package. Never throws: the solution's `result` says
-    whether it succeeded, with the data up to a failure."""
+    whether it succeeded, with the data up to a failure. The save times of
+    `saveat` must lie in [t0, t1] and increase (the callers check them before
+    anything is traced)."""
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
         if progress
         else dfx.NoProgressMeter()
     )
     kw = {} if adjoint is None else {"adjoint": adjoint}
-    return dfx.diffeqsolve(
-        dfx.ODETerm(vector_field),
-        solver,
-        t0=t0,
-        t1=t1,
-        dt0=dt0,
-        y0=y0,
-        args=args,
-        saveat=saveat,
-        stepsize_controller=controller,
-        max_steps=max_steps,
-        throw=False,
-        progress_meter=meter,
-        **kw,
-    )
+    with save_times_checked():
+        return dfx.diffeqsolve(
+            dfx.ODETerm(vector_field),
+            solver,
+            t0=t0,
+            t1=t1,
+            dt0=dt0,
+            y0=y0,
+            args=args,
+            saveat=saveat,
+            stepsize_controller=controller,
+            max_steps=max_steps,
+            throw=False,
+            progress_meter=meter,
+            **kw,
+        )
 
 
 class _ProjectedSolverAD(ProjectedSolver):
@@ -152,6 +160,7 @@ def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajector
     """
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)
+    check_times("ts", ts, scene.t0, scene.t1)  # (values known here only)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     sol = solve_scene(
         scene,

@@ -11,7 +11,10 @@ So `simulate`, `fit` and `sweep` compile with the option
 option: the user's own JAX code keeps XLA's defaults.
 """
 
+import contextlib
 import functools
+import sys
+import threading
 
 import equinox as eqx
 import jax
@@ -19,6 +22,31 @@ import jax.tree_util as jtu
 
 
 CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+NOTICE_AFTER_S = 3.0
+"""A compiled call still preparing its program after this long says so on stderr."""
+
+
+@contextlib.contextmanager
+def compile_notice(name: str):
+    """Print one line on stderr if the block (a jitted call: tracing, compiling and
+    dispatching) takes more than `NOTICE_AFTER_S`, so that a first call that
+    compiles a large solve is not taken for a hang."""
+    timer = threading.Timer(
+        NOTICE_AFTER_S,
+        lambda: print(
+            f"jaxstring: compiling {name} for this structure (once; later calls "
+            "with new parameter values reuse it) ...",
+            file=sys.stderr,
+            flush=True,
+        ),
+    )
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
 
 
 def cpu_jit(fun):
@@ -38,6 +66,8 @@ def cpu_jit(fun):
         False: jax.jit(call, static_argnums=1),
     }
 
+    name = getattr(fun, "__name__", "a solve").lstrip("_")
+
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
         dynamic, static = split(args, kwargs)
@@ -48,7 +78,10 @@ def cpu_jit(fun):
         on_cpu = not traced and all(
             d.platform == "cpu" for x in leaves for d in x.devices()
         )
-        return jitted[on_cpu](dynamic, static)
+        if traced:
+            return jitted[on_cpu](dynamic, static)
+        with compile_notice(name):
+            return jitted[on_cpu](dynamic, static)
 
     # The CPU compilation, for inspection: `fn.lower_cpu(*args).compile().as_text()`.
     wrapper.lower_cpu = lambda *args, **kwargs: jitted[True].lower(*split(args, kwargs))

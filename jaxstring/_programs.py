@@ -13,9 +13,9 @@ repr of the scene's and the solver settings' non-array parts, the structure,
 shapes and dtypes of their arrays, the versions of jax, jaxlib, diffrax and
 equinox, and a digest of jaxstring's own source. A scene whose non-array parts
 have no stable repr (a Python function among them) is not saved, nor a solve
-with host callbacks (a progress meter; equinox's runtime checks unless
-``EQX_ON_ERROR`` is ``nan`` or ``off``). A program that cannot be read back is
-traced again and rewritten.
+with host callbacks (a progress meter; an equinox runtime check, which jaxstring's
+default solves do not hold). A program that cannot be read back is traced again
+and rewritten.
 
 The program is stored with `pickle` (jax's own serialisation needs the optional
 `flatbuffers` package): the exported function's private `_get_vjp` field, which
@@ -35,7 +35,7 @@ import equinox as eqx
 import jax
 import jax.tree_util as jtu
 
-from ._jit import CPU_COMPILER_OPTIONS
+from ._jit import CPU_COMPILER_OPTIONS, compile_notice
 
 
 _FOLDER = {"path": None}
@@ -81,11 +81,9 @@ def _key(static, treedef, leaves) -> str | None:
 
 
 def usable(args) -> bool:
-    """Whether `args` may go through a saved program: a program folder is set,
-    no host callbacks are compiled, and every array is a concrete CPU array."""
+    """Whether `args` may go through a saved program: a program folder is set and
+    every array is a concrete CPU array."""
     if _FOLDER["path"] is None:
-        return False
-    if os.environ.get("EQX_ON_ERROR") not in ("nan", "off"):
         return False
     for x in jtu.tree_leaves(args):
         if isinstance(x, jax.core.Tracer):
@@ -109,13 +107,14 @@ def call(fn, *args):
     key = _key(static, treedef, leaves)
     if key is None or key in _REFUSED:
         return None
-    if key not in _LOADED:
-        exported = _load_or_export(fn, key, static, treedef, leaves)
-        if exported is None:
-            _REFUSED.add(key)
-            return None
-        _LOADED[key] = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
-    return _LOADED[key](*leaves)
+    with compile_notice(fn.__name__.lstrip("_").removesuffix("_fields")):
+        if key not in _LOADED:
+            exported = _load_or_export(fn, key, static, treedef, leaves)
+            if exported is None:
+                _REFUSED.add(key)
+                return None
+            _LOADED[key] = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
+        return _LOADED[key](*leaves)
 
 
 def _load_or_export(fn, key, static, treedef, leaves):

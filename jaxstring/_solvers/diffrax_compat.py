@@ -10,14 +10,21 @@ document as public:
    the units of the state and builds the stage Jacobian from the model's own.
 3. `RESULTS._index_to_message` and the `_value` of a result (`result_message`,
    `code_message`, `result_code`): the integer code and text of a failure.
+4. `diffeqsolve`'s run-time check of the save times (`equinox.internal.error_if`
+   with two messages of `diffrax._integrate`): jaxstring checks the save times
+   before it traces a solve, and `save_times_checked` leaves diffrax's copy of the
+   check out of the program, which otherwise compiles to a host callback that JAX
+   does not write to its persistent compilation cache.
 
 diffrax versions outside `TESTED` are refused at import with a message that names
 the installed and the tested versions, rather than failing deep inside a solve.
 """
 
+import contextlib
 from typing import Any, NamedTuple
 
 import diffrax as dfx
+import equinox.internal as eqxi
 import jax
 
 
@@ -118,3 +125,30 @@ def stage_arguments(args) -> StageArguments:
             "implicit_euler_k", None, vf_prod, None, t1, None, inner, control, y0
         )
     return StageArguments(None)
+
+
+# diffrax._integrate's checks of `SaveAt(ts=...)`: the only run-time checks (host
+# callbacks under equinox's default EQX_ON_ERROR=raise) in jaxstring's solves.
+SAVE_TIMES_CHECKS = (
+    "saveat.ts must be increasing or decreasing.",
+    "saveat.ts must lie between t0 and t1.",
+)
+
+
+@contextlib.contextmanager
+def save_times_checked():
+    """While tracing a `diffeqsolve` whose save times jaxstring has checked, leave
+    out diffrax's run-time check of them (and only that check: every other
+    `error_if` stays as equinox makes it)."""
+    original = eqxi.error_if
+
+    def error_if(x, pred, msg, *args, **kwargs):
+        if msg in SAVE_TIMES_CHECKS:
+            return x
+        return original(x, pred, msg, *args, **kwargs)
+
+    eqxi.error_if = error_if
+    try:
+        yield
+    finally:
+        eqxi.error_if = original

@@ -428,10 +428,12 @@ def main(argv=None) -> int:
             print(f"error: --frames must be an integer >= 2; got {args.frames}.",
                   file=sys.stderr)  # fmt: skip
             return 2
-        if args.cache:
-            from .._config import enable_compilation_cache
+        from .._config import disable_compilation_cache, enable_compilation_cache
 
-            enable_compilation_cache(min_compile_s=0.0, warn=False, programs=True)
+        if args.cache:
+            enable_compilation_cache(min_compile_s=0.0)
+        else:
+            disable_compilation_cache()
         if args.scene == "moordyn":
             from . import moordyn
 
