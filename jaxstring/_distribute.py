@@ -53,18 +53,31 @@ def export_chunk(fn, args):
     compiled in) and `outputs` the output structure (shapes and dtypes)."""
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jtu.tree_flatten(dynamic)
+    avals = tuple(jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves)
+    try:
+        cache_key = (fn, treedef, static, avals)
+        hash(cache_key)
+    except TypeError:  # a static part that cannot be hashed: export every time
+        cache_key = None
+    if cache_key is not None and cache_key in _EXPORTED:
+        return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
 
     def flat(*xs):
         return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
 
-    avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
     jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
     exported = jax.export.export(jitted)(*avals)
     # The private `_get_vjp` (a closure, not picklable) serves differentiation of
     # the loaded program only, which a sweep does not do.
     data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
     outputs = jtu.tree_unflatten(exported.out_tree, exported.out_avals)
-    return hashlib.sha256(data).hexdigest()[:32], data, leaves, outputs
+    key = hashlib.sha256(data).hexdigest()[:32]
+    if cache_key is not None:
+        _EXPORTED[cache_key] = (key, data, outputs)
+    return key, data, leaves, outputs
+
+
+_EXPORTED = {}  # (fn, structure, static parts, shapes) -> exported chunk program
 
 
 _POOL = {"executor": None, "workers": 0}
