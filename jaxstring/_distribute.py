@@ -47,12 +47,23 @@ def host_cores() -> int:
         return os.cpu_count() or 1
 
 
+def _flat(fn, args):
+    """`fn(*args)` as a function of the arrays of `args` alone (a list), and those
+    arrays: (flat function, leaves, treedef, static parts)."""
+    dynamic, static = eqx.partition(args, eqx.is_array)
+    leaves, treedef = jtu.tree_flatten(dynamic)
+
+    def flat(*xs):
+        return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
+
+    return flat, leaves, treedef, static
+
+
 def export_chunk(fn, args):
     """`fn(*args)` traced once and exported: (key, pickled program, leaves,
     outputs), the arrays of `args` as the program's inputs (everything else
     compiled in) and `outputs` the output structure (shapes and dtypes)."""
-    dynamic, static = eqx.partition(args, eqx.is_array)
-    leaves, treedef = jtu.tree_flatten(dynamic)
+    flat, leaves, treedef, static = _flat(fn, args)
     avals = tuple(jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves)
     try:
         cache_key = (fn, treedef, static, avals)
@@ -61,10 +72,6 @@ def export_chunk(fn, args):
         cache_key = None
     if cache_key is not None and cache_key in _EXPORTED:
         return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
-
-    def flat(*xs):
-        return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
-
     jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
     exported = jax.export.export(jitted)(*avals)
     # The private `_get_vjp` (a closure, not picklable) serves differentiation of
@@ -183,6 +190,50 @@ def _failed_like(aval):
     if np.issubdtype(aval.dtype, np.floating):
         return np.full(aval.shape, np.nan, aval.dtype)
     return np.full(aval.shape, WORKER_FAILED, aval.dtype)
+
+
+# --------------------------------------------------------------------------------------
+# Group sizes from memory
+
+
+def program_bytes(fn, args, device) -> int:
+    """The memory XLA plans for `fn(*args)` on `device`: arguments, outputs and
+    temporaries (less what outputs reuse of arguments), bytes."""
+    flat, leaves, _, _ = _flat(fn, args)
+    avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    compiled = jax.jit(flat, device=device).lower(*avals).compile()
+    m = compiled.memory_analysis()
+    return int(
+        m.argument_size_in_bytes
+        + m.output_size_in_bytes
+        + m.temp_size_in_bytes
+        - m.alias_size_in_bytes
+    )
+
+
+def fit_group(fn, args, n: int, device, free_bytes=None, budget=0.8, probe=(4, 8)):
+    """The largest group of the `n` members `args[0]` (a tuple of `(n,)` value
+    arrays) whose program `fn(group values, *args[1:])` fits `budget` of the free
+    memory of `device` (`free_bytes`: the device's free memory, default from
+    `device.memory_stats()`). The memory of a group grows linearly with its size:
+    the slope and offset come from two small compiled probes. Without a memory
+    limit (a CPU) all `n`."""
+    if free_bytes is None:
+        stats = device.memory_stats() or {}
+        if not stats.get("bytes_limit"):
+            return n
+        free_bytes = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
+    vals = args[0]
+    sizes = [min(p, n) for p in probe]
+    if sizes[0] == sizes[1]:
+        return n
+    use = [
+        program_bytes(fn, (tuple(v[:m] for v in vals),) + tuple(args[1:]), device)
+        for m in sizes
+    ]
+    per = max((use[1] - use[0]) / (sizes[1] - sizes[0]), 1.0)
+    base = use[0] - sizes[0] * per
+    return int(max(1, min(n, (budget * free_bytes - base) // per)))
 
 
 # --------------------------------------------------------------------------------------

@@ -573,6 +573,37 @@ def _on_devices(local, arrays, mine, scene, getters, fn, config, ts, batch_size,
     return jtu.tree_map(lambda x: np.asarray(x)[where], out), n_dev
 
 
+CPU_GROUP = 16
+"""`batch_size="auto"` on a CPU: groups of this many members (measured:
+docs/performance.md, "Sweeps")."""
+
+GPU_ONE_GROUP = 4096
+"""`batch_size="auto"` on a GPU: up to this many members per device run as one
+group; more are grouped to fit the device's memory (`jaxstring._distribute.
+fit_group`)."""
+
+
+def _group_size(batch_size, n, local, arrays, scene, getters, fn, config, ts,
+                devices) -> int:  # fmt: skip
+    """The members' group size: `batch_size`, all `n` for None, and for "auto"
+    `CPU_GROUP` on a CPU, on a GPU all of a device's members or as many as its free
+    memory holds."""
+    if batch_size is None:
+        return n
+    if batch_size != "auto":
+        return min(batch_size, n)
+    if jax.default_backend() == "cpu":
+        return min(CPU_GROUP, n)
+    devs = jax.local_devices() if devices == "auto" else list(devices or [])[:1]
+    devs = devs or jax.local_devices()[:1]
+    per_device = math.ceil(n / len(devs))
+    if per_device <= GPU_ONE_GROUP:
+        return per_device
+    vals = tuple(jnp.asarray(a) for a in arrays)
+    args = (vals, scene, getters, fn, config, ts, per_device)  # one vmap a probe
+    return _distribute.fit_group(local, args, per_device, devs[0])
+
+
 def _workers(processes, executor, members: int) -> int:
     """The worker processes of this host a sweep of `members` uses: `processes`,
     or with "auto" the host's cores where the members are many enough to pay for
@@ -596,7 +627,7 @@ def sweep(
     *,
     grid: bool = False,
     devices="auto",
-    batch_size: int | None = 16,
+    batch_size="auto",
     order: str = "given",
     mode: str = "vmap",
     fallback: bool = True,
@@ -645,10 +676,12 @@ def sweep(
       each calling `jax.distributed.initialize`) every process runs its block of
       the members and receives every member's result.
     - `batch_size`: run members in groups of this size (a vmap each, inside
-      `lax.map`; default 16, measured: docs/performance.md, "Sweeps"); None: all
-      members in one group. The members are padded to whole groups, so that every
-      member runs in a group of the same size wherever it runs (this process, a
-      device, a worker, a distributed process) and gets the same result.
+      `lax.map`); `"auto"` (default): `CPU_GROUP` (16) on a CPU (measured:
+      docs/performance.md, "Sweeps"), on a GPU all of a device's members, or as
+      many as its free memory holds; None: all members in one group. The members
+      are padded to whole groups, so that every member runs in a group of the
+      same size wherever it runs (this process, a device, a worker, a distributed
+      process) and gets the same result.
     - `order`: `"given"`, or `"sort"` to group members by their parameter values
       (lexicographically, in the order of `values`) -- results come back in the
       given order either way.
@@ -707,7 +740,7 @@ def sweep(
     config = solve_config("sweep", config, **options)
     config.check_scene(scene)
     solver = config.solver
-    if batch_size is not None:
+    if batch_size not in (None, "auto"):
         check_int("batch_size", batch_size, 1)
     _check_devices(devices)
     getters = []
@@ -792,17 +825,18 @@ def sweep(
     fn = _default_fn if fn is None else fn
 
     perm = np.lexsort(arrays[::-1]) if order == "sort" else np.arange(n)
-    # A jax.distributed job: this process runs its block of the (ordered) members.
-    start, block = (0, n)
-    if jax.process_count() > 1:
-        group_ = n if batch_size is None else min(batch_size, n)
-        start, block = _distribute.process_block(n, group_)
-    mine = perm[start : start + block]
-    workers = _workers(processes, executor, len(mine))
     # Members run in groups of `group` everywhere -- in this process, on each
     # device, in each worker's chunk, in each process's block -- padded with copies
     # of the last member, so that a member's result does not depend on where it ran.
-    group = n if batch_size is None else min(batch_size, n)
+    local_fn = _sweep_lockstep if mode == "lockstep" else _sweep_local
+    group = _group_size(batch_size, n, local_fn, arrays, scene, getters, fn, config,
+                        ts, devices)  # fmt: skip
+    # A jax.distributed job: this process runs its block of the (ordered) members.
+    start, block = (0, n)
+    if jax.process_count() > 1:
+        start, block = _distribute.process_block(n, group)
+    mine = perm[start : start + block]
+    workers = _workers(processes, executor, len(mine))
 
     def run(local):
         if len(mine) == 0:
@@ -826,7 +860,7 @@ def sweep(
         return out, {}, n_dev
 
     t = time.perf_counter()
-    result, failed, n_dev = run(_sweep_lockstep if mode == "lockstep" else _sweep_local)
+    result, failed, n_dev = run(local_fn)
     used = mode
     if mode == "lockstep" and fallback and result is not None:
         if not np.all(np.asarray(result[1]) == 0):

@@ -187,3 +187,30 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
             np.testing.assert_allclose(
                 got[key], one_process.out[key], rtol=1e-12, atol=1e-12
             )
+
+
+def test_group_size_fits_the_free_memory():
+    # The group chosen for a device with a given free memory: its program's planned
+    # memory (XLA's memory analysis) fits the budget, one member more would not.
+    import jax
+
+    from jaxstring._sweep import _sweep_local
+
+    scene = _scene()
+    config = js.SolveConfig(solver="bdf", n_save=5)
+    ts = config.save_times(scene.t0, scene.t1)
+    getters = (js._fit.resolve(scene, "alpha"),)
+    vals = (np.linspace(0.005, 0.05, 64),)
+    args = (vals, scene, getters, lambda traj, s: traj.end_mass, config, ts, 64)
+    device = jax.devices()[0]
+
+    def at(m):
+        return _distribute.program_bytes(
+            _sweep_local, ((vals[0][:m],),) + args[1:], device
+        )
+
+    free = 3 * at(4)
+    g = _distribute.fit_group(_sweep_local, args, 64, device, free_bytes=free)
+    assert 4 < g < 64
+    assert at(g) <= 0.8 * free * 1.02  # linear in the group size, to 2 %
+    assert at(g + 2) > 0.8 * free * 0.98
