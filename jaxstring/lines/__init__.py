@@ -26,6 +26,15 @@ from .bodies import (
     skew as skew,
 )
 from .effects import Seabed as Seabed
+from .statics import (
+    MooringEquilibrium as MooringEquilibrium,
+    MooringLoads as MooringLoads,
+    MooringPoint as MooringPoint,
+    MooringSystem as MooringSystem,
+    coupled_stiffness as coupled_stiffness,
+    mooring_equilibrium as mooring_equilibrium,
+    mooring_system as mooring_system,
+)
 from .models import (
     FreePoint as FreePoint,
     LineNetwork as LineNetwork,
@@ -75,4 +84,11 @@ __all__ = [
     "rotation_from_vector",
     "rotation_matrix",
     "skew",
+    "MooringEquilibrium",
+    "MooringLoads",
+    "MooringPoint",
+    "MooringSystem",
+    "coupled_stiffness",
+    "mooring_equilibrium",
+    "mooring_system",
 ]

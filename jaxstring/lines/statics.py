@@ -667,6 +667,18 @@ def _residual_scale(system, n_free, ls):
     return jnp.where(jnp.asarray(rot), 1.0 / ls, 1.0)
 
 
+def _strong(tree):
+    """Every floating array leaf as a float64 array of a fixed (not weak) type, so
+    that parameters set from Python numbers (`eqx.tree_at(..., 2.0)`) reuse the
+    compiled solve."""
+    return jax.tree_util.tree_map(
+        lambda x: x.astype(jnp.float64)
+        if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)
+        else x,
+        tree,
+    )
+
+
 def _check_system(system):
     if not isinstance(system, MooringSystem):
         raise ValueError(
@@ -818,8 +830,18 @@ def _newton(system, loads, guess, cfg: _Cfg):
         v = jnp.sqrt(jnp.sum((r * weights) ** 2)) / fs
         return jnp.where(jnp.isfinite(v), v, jnp.inf)
 
+    # columns scaled like the rows (a rotation by the length scale), so that the
+    # least-squares step below weighs forces and moments alike
+    cols = 1.0 / weights
+
     def step(r, J):
-        dx = -jnp.linalg.solve(J[:, :nf], r)
+        # The Newton step, in the least-squares sense: where the Jacobian is
+        # singular (a slack or vertical line gives no stiffness across itself at
+        # the start) the step leaves the unrestrained directions alone, rather
+        # than failing.
+        Js = weights[:, None] * J[:, :nf] * cols[None, :]
+        ys, *_ = jnp.linalg.lstsq(Js, -r * weights, rcond=1e-13)
+        dx = ys * cols
         ok = jnp.all(jnp.isfinite(dx))
         dx = jnp.where(ok, dx, 0.0)
         big_t = jnp.max(jnp.where(rot, 0.0, jnp.abs(dx)))
@@ -1081,7 +1103,7 @@ def mooring_equilibrium(
     offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
     guess = _check_vector("guess", guess, system.n_free, "m, rad")
     cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, False)
-    out = _equilibrium(system, loads, offsets, guess, cfg)
+    out = _equilibrium(*_strong((system, loads, offsets, guess)), cfg)
     if throw:
         out = _throw(out)
     return out
@@ -1090,10 +1112,10 @@ def mooring_equilibrium(
 def _throw(out):
     st = out.status
     return eqx.tree_at(
-        lambda o: o.free,
+        lambda o: o.tension,
         out,
         eqx.branched_error_if(
-            out.free,
+            out.tension,
             jnp.any(st != 0),
             jnp.max(st),
             [f"mooring_equilibrium: {m}" for m in STATUS_MESSAGES],
@@ -1141,7 +1163,7 @@ def coupled_stiffness(
     offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
     guess = _check_vector("guess", guess, system.n_free, "m, rad")
     cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, True)
-    K, out = _stiffness(system, loads, offsets, guess, cfg)
+    K, out = _stiffness(*_strong((system, loads, offsets, guess)), cfg)
     if throw:
         out = _throw(out)
         K = eqx.error_if(
