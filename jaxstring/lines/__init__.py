@@ -26,15 +26,6 @@ from .bodies import (
     skew as skew,
 )
 from .effects import Seabed as Seabed
-from .statics import (
-    MooringEquilibrium as MooringEquilibrium,
-    MooringLoads as MooringLoads,
-    MooringPoint as MooringPoint,
-    MooringSystem as MooringSystem,
-    coupled_stiffness as coupled_stiffness,
-    mooring_equilibrium as mooring_equilibrium,
-    mooring_system as mooring_system,
-)
 from .models import (
     FreePoint as FreePoint,
     LineNetwork as LineNetwork,
@@ -52,6 +43,15 @@ from .moordyn import (
     read_motion as read_motion,
     static_tensions as static_tensions,
     write_outputs as write_outputs,
+)
+from .statics import (
+    MooringEquilibrium as MooringEquilibrium,
+    MooringLoads as MooringLoads,
+    MooringPoint as MooringPoint,
+    MooringSystem as MooringSystem,
+    coupled_stiffness as coupled_stiffness,
+    mooring_equilibrium as mooring_equilibrium,
+    mooring_system as mooring_system,
 )
 
 
