@@ -437,7 +437,7 @@ class MooringSystem(eqx.Module):
 
 def _load_array(name, value, n, k):
     if value is None:
-        return jnp.zeros((n, k))
+        return np.zeros((n, k))
     if isinstance(value, dict):
         out = np.zeros((n, k))
         for i, v in value.items():
@@ -451,7 +451,7 @@ def _load_array(name, value, n, k):
                     f"`{name}` loads: entry {i} must have shape ({k},); got {v.shape}."
                 )
             out[i] = v
-        return jnp.asarray(out)
+        return out
     return f64(value)
 
 
@@ -671,12 +671,14 @@ def _strong(tree):
     """Every floating array leaf as a float64 array of a fixed (not weak) type, so
     that parameters set from Python numbers (`eqx.tree_at(..., 2.0)`) reuse the
     compiled solve."""
-    return jax.tree_util.tree_map(
-        lambda x: x.astype(jnp.float64)
-        if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)
-        else x,
-        tree,
-    )
+
+    def strong(x):
+        if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating):
+            if x.weak_type or x.dtype != jnp.float64:
+                return x.astype(jnp.float64)
+        return x
+
+    return jax.tree_util.tree_map(strong, tree)
 
 
 def _check_system(system):
@@ -700,7 +702,7 @@ def _check_loads(system, loads):
 
 def _check_vector(name, value, n, unit):
     if value is None:
-        return jnp.zeros((n,))
+        return np.zeros((n,))
     value = f64(value)
     _check_shape_finite(name, value, (n,), unit)
     return value
@@ -770,6 +772,7 @@ class _Cfg(NamedTuple):
     max_step: float
     line_tol: float
     with_stiffness: bool
+    throw: bool
 
 
 def _outs(system, loads, x, u, line_tol) -> _Forces:
@@ -998,12 +1001,18 @@ def _equilibrium_core(system, loads, offsets, guess, cfg: _Cfg):
 
 @eqx.filter_jit
 def _equilibrium(system, loads, offsets, guess, cfg):
-    return _equilibrium_core(system, loads, offsets, guess, cfg)[0]
+    out = _equilibrium_core(system, loads, offsets, guess, cfg)[0]
+    return _throw(out) if cfg.throw else out
 
 
 @eqx.filter_jit
 def _stiffness(system, loads, offsets, guess, cfg):
     out, K = _equilibrium_core(system, loads, offsets, guess, cfg)
+    if cfg.throw:
+        out = _throw(out)
+        K = eqx.error_if(
+            K, ~jnp.all(out.converged), "coupled_stiffness: no equilibrium"
+        )
     return K, out
 
 
@@ -1102,11 +1111,8 @@ def mooring_equilibrium(
     _check_options(current, tol, max_iter, max_step)
     offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
     guess = _check_vector("guess", guess, system.n_free, "m, rad")
-    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, False)
-    out = _equilibrium(*_strong((system, loads, offsets, guess)), cfg)
-    if throw:
-        out = _throw(out)
-    return out
+    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, False, bool(throw))
+    return _equilibrium(*_strong((system, loads, offsets, guess)), cfg)
 
 
 def _throw(out):
@@ -1162,14 +1168,8 @@ def coupled_stiffness(
         )
     offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
     guess = _check_vector("guess", guess, system.n_free, "m, rad")
-    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, True)
-    K, out = _stiffness(*_strong((system, loads, offsets, guess)), cfg)
-    if throw:
-        out = _throw(out)
-        K = eqx.error_if(
-            K, ~jnp.all(out.converged), "coupled_stiffness: " + "no equilibrium"
-        )
-    return K, out
+    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, True, bool(throw))
+    return _stiffness(*_strong((system, loads, offsets, guess)), cfg)
 
 
 # ---------------------------------------------------------------------------
