@@ -22,8 +22,9 @@ optimistix's Newton method from OC3's design with the exact Jacobian
 implicit-function theorem). Along the stiffness target the tension under the
 load is not monotone in L (it peaks near L = 880 m; the notes scan it), so two
 designs meet both with equality; Newton from OC3's design finds the shorter.
-The laid length of the most loaded line under the load is reported (no anchor
-uplift while it is positive).
+The shortest laid length under the load is reported: 0 for both designs
+(the loaded lines lift off the seabed entirely at 1 MN, OC3's too; a
+drag-anchor design would add a laid-length constraint).
 
 Writes ``results/mooring_design.{md,csv}`` (OC3's design and the new one:
 L, R, surge stiffness, offset and largest tension at 1 MN; compile and solve

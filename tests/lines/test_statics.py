@@ -123,3 +123,24 @@ def test_loads_dict_and_array_agree(points_case):
     b = s.loads(point=jnp.zeros((6, 3)).at[3].set(jnp.array([1.0, 2.0, 3.0])))
     np.testing.assert_array_equal(np.asarray(a.point), np.asarray(b.point))
     assert a.body.shape == (0, 6)
+
+
+def test_pinned_body_is_the_coupled_one_reduced(body_case):
+    # a pinned body (position held, rotation free) settles where the lines'
+    # moment vanishes; its 3x3 stiffness is the coupled body's 6x6 at that
+    # rotation with the rotations condensed out
+    s = mooring_system(DECK, g=9.81, vessel=Body("pinned", position=[0.0, 0.0, 0.0]))
+    K3, out = coupled_stiffness(s)
+    assert s.n_free == 3 and s.n_coupled == 3 and bool(out.converged)
+    rot = np.asarray(out.body_rotation[0])
+    assert 0 < np.abs(rot).max() < 1e-3  # the deck's rounding tilts it slightly
+    held = mooring_system(
+        DECK, g=9.81, vessel=Body("coupled", position=[0.0, 0.0, 0.0], rotation=rot)
+    )
+    K6, out6 = coupled_stiffness(held)
+    np.testing.assert_allclose(np.asarray(out6.coupled_force[3:]), 0.0, atol=1e-6)
+    K6 = np.asarray(K6)
+    schur = K6[:3, :3] - K6[:3, 3:] @ np.linalg.solve(K6[3:, 3:], K6[3:, :3])
+    np.testing.assert_allclose(
+        np.asarray(K3), schur, rtol=0, atol=1e-9 * np.abs(K6).max()
+    )
