@@ -566,6 +566,20 @@ STUDIES = (
         ),
     ),
     Study(
+        "sweep_scale",
+        "sweep_scale.py",
+        "sweeps over worker processes against CVODE-numba over as many processes",
+        "2 min / 30 min",
+        (
+            *PENDULUM,
+            "jaxstring/_sweep.py",
+            "jaxstring/_distribute.py",
+            "jaxstring/_worker.py",
+            "jaxstring/testing/peers.py",
+        ),
+        (Run((), _files("sweep_scale", ext=("md", "csv", "png"))),),
+    ),
+    Study(
         "compile_options",
         "compile_options.py",
         "XLA:CPU compile options against compile and run time of four solves",

@@ -33,6 +33,7 @@ import optax
 from ._blas import single_blas_thread
 from ._integrate import solve
 from ._jit import cpu_jit
+from ._presets import solver_for
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig, solve_config
@@ -312,7 +313,7 @@ def identify_config(scene, config, options, derivative, simulate=True):
     """The `SolveConfig` of an identification solve of `scene` ("identify"
     defaults, `config`, the shortcuts `options`), checked against the scene and
     against the derivative it serves ("gradient" or "jacobian")."""
-    config = solve_config("identify", config, **options)
+    config = solver_for(solve_config("identify", config, **options), scene)
     config.check_scene(scene)
     if isinstance(config.adjoint_for(derivative), SensitivityAdjoint) and not simulate:
         raise ValueError(

@@ -80,6 +80,15 @@ def resolve_preset(name: str, model) -> dict:
     return {key: chosen[key] for key in ("solver", "rtol", "atol")}
 
 
+def solver_for(config, scene):
+    """`config` with the solver "auto" replaced by the solver of the "balanced"
+    preset of `scene`'s system (as is otherwise)."""
+    if isinstance(config.solver, str) and config.solver == "auto":
+        system = preset_system(scene.model)
+        return config.replace(solver=ACCURACY_PRESETS["balanced"][system]["solver"])
+    return config
+
+
 def preset(name: str, scene):
     """The `SolveConfig` of accuracy preset `name` ("draft", "balanced",
     "precise") for `scene`'s system: the simulate defaults with the preset's solver

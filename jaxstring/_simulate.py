@@ -2,7 +2,7 @@
 
 from ._blas import single_blas_thread
 from ._integrate import solve_compiled
-from ._presets import preset
+from ._presets import preset, solver_for
 from ._scene import Scene
 from ._solve_config import SolveConfig, solve_config
 
@@ -60,7 +60,7 @@ def simulate(
                 f"also give {', '.join(clash)}."
             )
         config = preset(accuracy, scene)
-    config = solve_config("simulate", config, **options)
+    config = solver_for(solve_config("simulate", config, **options), scene)
     config.check_scene(scene)
     ts = config.save_times(scene.t0, scene.t1)
     scene, solve_config_, ts = config.placed((scene, config.replace(ts=None), ts))

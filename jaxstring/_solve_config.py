@@ -51,7 +51,12 @@ SOLVE_DEFAULTS: dict[str, dict[str, Any]] = {
         "device": "auto",
     },
     "identify": {},
-    "sweep": {},
+    # Sweeps run many members of one scene: the solver measured fastest for the
+    # scene's system (its "balanced" preset: BDF in displacement variables,
+    # Rodas5P in natural variables and for the other systems), which also runs
+    # vmapped groups without Newton loops of their own (Rodas5P) or with one
+    # Jacobian a step (BDF).
+    "sweep": {"solver": "auto"},
 }
 
 ADJOINTS = ("auto", "recursive", "direct", "backsolve", "forward", "sensitivity")
@@ -102,8 +107,9 @@ class SolveConfig(eqx.Module):
 
     **Fields** (defaults: the row "simulate" of `jaxstring.SOLVE_DEFAULTS`):
 
-    - `solver`: a name of `jaxstring.SOLVERS` or a `diffrax.AbstractSolver`
-      (default `"kvaerno5"`).
+    - `solver`: a name of `jaxstring.SOLVERS`, a `diffrax.AbstractSolver`, or
+      `"auto"`: the solver of the "balanced" accuracy preset of the scene's system
+      (default `"kvaerno5"`; sweeps: `"auto"`).
     - `rtol`, `atol`: error tolerances of the step-size controller (> 0).
     - `ts`: save times, s, inside the scene's span (None: `n_save` equally spaced
       points over it).

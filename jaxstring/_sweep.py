@@ -84,6 +84,7 @@ from ._blas import single_blas_thread
 from ._fit import _follow, parameter_names, resolve
 from ._integrate import integrate, solve
 from ._jit import cpu_jit
+from ._presets import solver_for
 from ._scene import Scene
 from ._solve_config import SolveConfig, solve_config
 from ._solvers.diffrax_compat import code_message, result_code
@@ -737,7 +738,7 @@ def sweep(
                 "give `processes` or `executor`, not both (an executor has its own "
                 f"workers); got processes={processes!r}."
             )
-    config = solve_config("sweep", config, **options)
+    config = solver_for(solve_config("sweep", config, **options), scene)
     config.check_scene(scene)
     solver = config.solver
     if batch_size not in (None, "auto"):

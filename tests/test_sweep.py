@@ -30,7 +30,7 @@ def _end_and_tension(traj, scene):
     }
 
 
-KW = dict(rtol=1e-9, atol=1e-9, n_save=11)
+KW = dict(solver="kvaerno5", rtol=1e-9, atol=1e-9, n_save=11)
 
 
 def test_sweep_matches_loop_of_simulate_calls():

@@ -127,15 +127,22 @@ def kvaerno_class(name: str, scene):
     return (KVAERNO if per_stage else KVAERNO_STEP_JACOBIAN)[name]
 
 
+AUTO = "auto"
+"""The solver name that stands for the measured choice for the scene's system (the
+solver of its "balanced" accuracy preset: `jaxstring.preset`)."""
+
+
 def check_solver(solver) -> None:
-    if isinstance(solver, dfx.AbstractSolver):
+    if isinstance(solver, dfx.AbstractSolver) or solver == AUTO:
         return
-    check_choice("solver", solver, tuple(SOLVERS))
+    check_choice("solver", solver, tuple(SOLVERS) + (AUTO,))
 
 
 def is_adaptive(solver) -> bool:
     if isinstance(solver, dfx.AbstractSolver):
         return isinstance(solver, dfx.AbstractAdaptiveSolver)
+    if solver == AUTO:  # every preset's solver is adaptive
+        return True
     return SOLVERS[solver][1]
 
 
