@@ -34,7 +34,7 @@ import jaxstring as js
 
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from tests.test_reference_scipy import _ReferenceString  # noqa: E402
+from tests.pendulum.test_reference_scipy import _ReferenceString  # noqa: E402
 
 
 K, EA, ALPHA, T1, N_SAMPLES, NOISE = 16, 1e3, 0.05, 2.0, 100, 5e-4

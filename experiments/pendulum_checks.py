@@ -23,7 +23,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxstring as js  # noqa: E402
 from tests.helpers import FORMULATIONS, fitted_order, run, zero_crossings  # noqa: E402
-from tests.test_physics import HARD_CASES, G, _axial_mode_scene  # noqa: E402
+from tests.pendulum.test_physics import HARD_CASES, G, _axial_mode_scene  # noqa: E402
 
 
 def main(quick: bool = False) -> str:

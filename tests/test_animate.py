@@ -44,6 +44,7 @@ def test_tether_animation_draws_the_cable(tmp_path):
     assert _frames(path) == 5
 
 
+@pytest.mark.slow
 def test_tandem_animation_draws_the_vessels(tmp_path):
     from jaxstring.tandem import plot
 

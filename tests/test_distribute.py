@@ -91,6 +91,7 @@ def test_members_of_a_dead_worker_are_run_again(one_process):
     _same(one_process, again)
 
 
+@pytest.mark.slow
 def test_a_chunk_that_keeps_failing_carries_a_clear_status(one_process):
     # A worker running the first chunk dies every time (in parallel twice, then on
     # its own): that chunk's members fail, with a status that says so; the chunks

@@ -94,6 +94,7 @@ class _TwoData(eqx.Module):
         return (traj.end_mass - data).ravel()
 
 
+@pytest.mark.slow
 def test_sensitivity_jacobians_recover_the_parameters_and_the_covariance():
     # The Jacobian from sensitivities integrated beside the state (under the error
     # control) against forward mode through the solve, on a smooth motion where
@@ -110,6 +111,7 @@ def test_sensitivity_jacobians_recover_the_parameters_and_the_covariance():
     np.testing.assert_allclose(sens.cov, fwd.cov, rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_gauss_newton_jacobians_agree_between_forward_mode_and_sensitivities():
     # gauss_newton's Jacobian in the parameters' own units, both ways, against
     # central differences of tight solves (rtol 1e-11), column by column.

@@ -107,6 +107,7 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
     assert float(out.stdout.strip().splitlines()[-1]) < 1e-12
 
 
+@pytest.mark.slow
 def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
     # Two CPU devices, vmapped BDF groups of 16: with one dispatching thread per
     # device the second call of the same compiled sweep deadlocked inside XLA:CPU;
@@ -264,7 +265,10 @@ def test_member_rms_max_is_the_largest_member_rms():
     assert float(member_rms_max(x)) == pytest.approx(np.sqrt(12.5), rel=1e-15)
 
 
-@pytest.mark.parametrize("solver", ["implicit_euler_fixed", "trapezoid"])
+@pytest.mark.parametrize(
+    "solver",
+    [pytest.param("implicit_euler_fixed", marks=pytest.mark.slow), "trapezoid"],
+)
 def test_fixed_step_lockstep_equals_the_loop_to_rounding(solver):
     # With a fixed step every member takes the same steps alone and in the sweep;
     # the lockstep group (members' nodes concatenated into one banded system)

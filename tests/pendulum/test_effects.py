@@ -1,5 +1,7 @@
 """Effects: each one is what its formula says; a left-out effect costs nothing."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -90,6 +92,7 @@ def test_same_structure_does_not_recompile_for_new_parameter_values():
     assert _integrate.jit_solve.cache_size() - before <= 1
 
 
+@functools.cache
 def _system_scenes():
     """One small scene of each system."""
     pendulum = js.pendulum.string_pendulum(k=4, t1=0.1)

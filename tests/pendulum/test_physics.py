@@ -166,6 +166,7 @@ def test_tangent_projection_prevents_drift():
     assert float(np.max(kept.constraint_error)) < 1e-12
 
 
+@pytest.mark.slow
 def test_three_d_planar_motion_matches_two_d():
     for formulation in ("displacement", "natural"):
         two = run(formulation, k=10, t1=0.5, n_save=51)

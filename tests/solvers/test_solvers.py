@@ -91,6 +91,7 @@ def test_failed_solve_returns_status_and_data_up_to_failure():
     assert 0.0 <= float(traj.t_end) < 1.0
 
 
+@pytest.mark.slow
 def test_stage_newton_avoids_veryChord_early_divergence():
     # diffrax 0.7.2's VeryChord declares divergence whenever Newton has not met its
     # tolerance after two iterations, so it rejects many steps that a contracting
@@ -108,7 +109,9 @@ def test_stage_newton_avoids_veryChord_early_divergence():
     assert _err(ours, ref) < 1e-4
 
 
-@pytest.mark.parametrize("formulation", ["natural", "displacement"])
+@pytest.mark.parametrize(
+    "formulation", [pytest.param("natural", marks=pytest.mark.slow), "displacement"]
+)
 def test_fixed_step_newton_variants_solve_the_same_steps(formulation):
     # newton="chord": one factorisation per step and simplified Newton updates; in
     # natural variables they converge, in displacement variables at EA = 1e6 they
