@@ -677,6 +677,7 @@ def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
     units = ["(s)"] + ["(N)" if n.endswith(("TEN", "TEN1")) or "TEN" in n else "(m)"
                        for n in names[1:]]  # fmt: skip
     data = np.stack([ch[n] for n in names], axis=1)
+    os.makedirs(os.path.dirname(os.fspath(stem)) or ".", exist_ok=True)
     out = f"{stem}.out"
     with open(out, "w") as f:
         f.write("\t".join(names) + "\n")
