@@ -190,6 +190,7 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
             )
 
 
+@pytest.mark.slow
 def test_group_size_fits_the_free_memory():
     # The group chosen for a device with a given free memory: its program's planned
     # memory (XLA's memory analysis) fits the budget, one member more would not.

@@ -26,6 +26,7 @@ def _reference():
     return sc, np.asarray(ref.end_mass)
 
 
+@pytest.mark.slow
 def test_newton_failures_no_longer_cycle_the_step_size():
     """With diffrax's PID controller the error estimate asks for steps 1.5-5x
     larger, the stage Newton iteration diverges, the step is cut to 0.2x, and the

@@ -115,6 +115,7 @@ def _end_loss(traj, scene):
     )
 
 
+@pytest.mark.slow
 def test_reverse_mode_gradient_matches_central_differences():
     # d(loss)/d(alpha, EA) through the stage solves (custom_root), reverse mode.
     scene = js.string_pendulum(formulation="angle", k=4, EA=1e3, alpha=0.02, t1=0.3)

@@ -596,6 +596,7 @@ def test_solvers_with_the_model_jacobian_equal_the_probed_one(solver, monkeypatc
     assert err < 1e-6, err
 
 
+@pytest.mark.slow
 def test_rodas5p_gradient_through_the_model_jacobian():
     # Rodas5P's stages use J itself, so a gradient of the solution differentiates
     # the model's Jacobian (dN/d eps and dN/d eps_dot of the laws, to second
