@@ -19,12 +19,14 @@ over this host's cores, and the processes of a `jax.distributed` job.
 
 import atexit
 import concurrent.futures as cf
+import contextlib
 import dataclasses
 import hashlib
 import math
 import multiprocessing
 import os
 import pickle
+import sys
 
 import equinox as eqx
 import jax
@@ -97,14 +99,39 @@ def process_pool(workers: int) -> cf.ProcessPoolExecutor:
         return _POOL["executor"]
     shutdown_pool()
     cache = jax.config.jax_compilation_cache_dir or None
-    _POOL["executor"] = cf.ProcessPoolExecutor(
+    executor = cf.ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_worker.init,
         initargs=(cache,),
     )
-    _POOL["workers"] = workers
-    return _POOL["executor"]
+    with _main_not_rerun():  # a worker process starts at a submit with none idle
+        for _ in range(workers):
+            executor.submit(_worker.ready)
+    _POOL["executor"], _POOL["workers"] = executor, workers
+    return executor
+
+
+@contextlib.contextmanager
+def _main_not_rerun():
+    """Start processes without the parent's `__main__` module.
+
+    A spawned process imports the parent's main script before it runs anything,
+    which re-runs a script without an ``if __name__ == "__main__":`` guard (and
+    its sweep). jaxstring's workers run exported programs and need nothing from
+    it, so the script's path and spec are hidden while they start."""
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    saved = {k: main.__dict__[k] for k in ("__file__", "__spec__") if k in main.__dict__}
+    main.__dict__.pop("__file__", None)
+    main.__spec__ = None
+    try:
+        yield
+    finally:
+        main.__dict__.pop("__spec__", None)
+        main.__dict__.update(saved)
 
 
 def shutdown_pool() -> None:
@@ -133,7 +160,8 @@ def run_chunks(executor, key, program, chunks, own_pool):
             shutdown_pool()
             executor = process_pool(workers)
         submit = lambda i: executor.submit(_worker.run, key, program, chunks[i])
-        futures = {submit(i): i for i in todo}
+        with _main_not_rerun() if own_pool else contextlib.nullcontext():
+            futures = {submit(i): i for i in todo}
         lost = []
         for future in cf.as_completed(futures):
             i = futures[future]

@@ -29,6 +29,11 @@ def init(cache_dir: str | None) -> None:
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
+def ready() -> bool:
+    """Nothing: submitted once to start a pool's processes."""
+    return True
+
+
 def run(key: str, program: bytes, leaves: list):
     """The pickled exported `program` (named `key`) applied to `leaves` (NumPy
     arrays); its outputs as NumPy arrays."""

@@ -190,6 +190,38 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
             )
 
 
+_UNGUARDED = """
+import sys
+import numpy as np
+import jaxstring as js
+res = js.sweep(js.string_pendulum(k=4, t1=0.2), {"alpha": np.linspace(0.005, 0.05, 8)},
+               solver="bdf", n_save=5, batch_size=2, processes=2)
+np.savez(sys.argv[1], result=res.result, **res.out)
+"""
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_by_the_workers(
+    tmp_path, one_process
+):
+    # Spawned processes import the parent's main script; jaxstring's workers must
+    # not (the script would start its sweep again in each worker).
+    script = tmp_path / "unguarded.py"
+    script.write_text(_UNGUARDED)
+    out = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "r.npz")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "Traceback" not in out.stderr, out.stderr[-3000:]
+    got = np.load(tmp_path / "r.npz")
+    np.testing.assert_array_equal(got["result"], one_process.result)
+    for key in one_process.out:
+        np.testing.assert_allclose(got[key], one_process.out[key], rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.slow
 def test_group_size_fits_the_free_memory():
     # The group chosen for a device with a given free memory: its program's planned
