@@ -48,9 +48,7 @@ def main(quick=False, k=20, t1=1.0, repeats=5):
     formulations = ("displacement",) if quick else ("displacement", "natural", "angle")
     adjoints = (("forward", None), ("recursive", "auto"), ("recursive", None))
     for form in formulations:
-        scene = js.string_pendulum(
-            formulation=form, k=k, EA=1e4, alpha=0.02, t1=t1
-        )
+        scene = js.string_pendulum(formulation=form, k=k, EA=1e4, alpha=0.02, t1=t1)
         cfg = _fit.SolveConfig(rtol=1e-8, atol=1e-8, n_save=101)
         fwd = eqx.filter_jit(lambda s: loss_fn(_fit.solve(s, cfg), s))
         c_f, t_f = timed(lambda: fwd(scene), repeats)

@@ -121,9 +121,7 @@ class ZeroLoad(AbstractStringLoad):
 def simulate_per_step(k, t1):
     """Per-step wall time of a short release with the model's Jacobian and with
     the probed one (the same scene plus `ZeroLoad`), runs interleaved, best of 3."""
-    sc = jaxstring.string_pendulum(
-        formulation="displacement", k=k, EA=1e6, t1=t1
-    )
+    sc = jaxstring.string_pendulum(formulation="displacement", k=k, EA=1e6, t1=t1)
     probed = eqx.tree_at(lambda s: s.effects, sc, sc.effects + (ZeroLoad(),))
     ts = np.linspace(0.0, t1, 5)
     runs = {
@@ -166,9 +164,7 @@ def kernels_per_step(k, t1, solver):
     EA = 1e6, rtol = atol = 1e-7), counted in a profiler trace, and the wall time
     per attempt of the same run without the profiler (best of 3): their ratio is
     the mean cost of one kernel, launch included."""
-    sc = jaxstring.string_pendulum(
-        formulation="displacement", k=k, EA=1e6, t1=t1
-    )
+    sc = jaxstring.string_pendulum(formulation="displacement", k=k, EA=1e6, t1=t1)
     ts = np.linspace(0.0, t1, 5)
     run = lambda: jax.block_until_ready(
         jaxstring.simulate(sc, solver, rtol=1e-7, atol=1e-7, ts=ts, max_steps=10**6)

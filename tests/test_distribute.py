@@ -219,7 +219,9 @@ def test_a_script_without_a_main_guard_is_not_run_again_by_the_workers(
     got = np.load(tmp_path / "r.npz")
     np.testing.assert_array_equal(got["result"], one_process.result)
     for key in one_process.out:
-        np.testing.assert_allclose(got[key], one_process.out[key], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            got[key], one_process.out[key], rtol=1e-12, atol=1e-12
+        )
 
 
 @pytest.mark.slow

@@ -130,7 +130,9 @@ def test_fit_freezes_other_leaves_and_rejects_bad_input():
         make_adjoint("adjoint")
 
 
-@pytest.mark.parametrize("positive", [pytest.param(False, marks=pytest.mark.slow), True])
+@pytest.mark.parametrize(
+    "positive", [pytest.param(False, marks=pytest.mark.slow), True]
+)
 def test_sensitivity_gradient_matches_central_differences(positive):
     # The sensitivities integrated beside the state under its error control give
     # the gradient of the same loss as differentiating the solve (central
