@@ -1,11 +1,12 @@
 """Mooring-line networks (MoorDyn's lumped-mass model): lines of lumped masses
-between fixed, prescribed and free points; weight, buoyancy and Morison drag in a
-current (the chain loads of `jaxstring.chain`), added mass, seabed contact with
-smooth friction; time-varying unstretched lengths; MoorDyn v2 decks in and
-MoorDyn-style output channels out.
+between fixed, prescribed and free points, with bending stiffness and rods;
+weight, buoyancy and Morison drag in a current (the chain loads of
+`jaxstring.chain`), added mass, seabed contact with smooth friction;
+time-varying unstretched lengths; MoorDyn v2 decks in and MoorDyn-style output
+channels out.
 
-Model and points in `models`, seabed contact in `effects`, decks and outputs in
-`moordyn`.
+Model and points in `models`, bending stiffness in `bending`, rods in `rods`,
+seabed contact in `effects`, decks and outputs in `moordyn`.
 """
 
 from ..chain import (
@@ -33,6 +34,7 @@ from .moordyn import (
     static_tensions as static_tensions,
     write_outputs as write_outputs,
 )
+from .rods import Rod as Rod, RodEnd as RodEnd
 
 
 __all__ = [
@@ -43,6 +45,8 @@ __all__ = [
     "Seabed",
     "FreePoint",
     "LineNetwork",
+    "Rod",
+    "RodEnd",
     "equilibrium",
     "initial_shape",
     "MoorDynDeck",
