@@ -6,7 +6,8 @@ time-varying unstretched lengths; MoorDyn v2 decks in and MoorDyn-style output
 channels out.
 
 Model and points in `models`, bending stiffness in `bending`, rods in `rods`,
-seabed contact in `effects`, decks and outputs in `moordyn`.
+rigid frames, prescribed motions and their equations of motion in `rigid`, seabed
+contact in `effects`, decks and outputs in `moordyn`.
 """
 
 from ..chain import (
@@ -34,6 +35,7 @@ from .moordyn import (
     static_tensions as static_tensions,
     write_outputs as write_outputs,
 )
+from .rigid import RigidMotion as RigidMotion
 from .rods import Rod as Rod, RodEnd as RodEnd
 
 
@@ -45,6 +47,7 @@ __all__ = [
     "Seabed",
     "FreePoint",
     "LineNetwork",
+    "RigidMotion",
     "Rod",
     "RodEnd",
     "equilibrium",

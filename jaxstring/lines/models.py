@@ -55,6 +55,7 @@ from ..chain import (
     AbstractEnd,
     Buoyancy,
     ChainKinematics,
+    Drag,
     Gravity,
     PiecewiseLinear,
     links,
@@ -62,7 +63,16 @@ from ..chain import (
 )
 from .bending import bending_forces
 from .effects import Seabed
-from .rods import Rod, RodEnd
+from .rigid import (
+    Frame,
+    PointSet,
+    Rotational,
+    group_accelerations,
+    matrix_quat,
+    quat_matrix,
+    quat_rate,
+)
+from .rods import Rod, RodEnd, rod_loads
 
 
 def _none_or_f64(x):
@@ -111,14 +121,35 @@ class _Bending(eqx.Module):
     clamp_b_sign: np.ndarray  # +1: the rod's axis points out of the line
 
 
+class _Frames(eqx.Module):
+    """Static description of the rigid frames: frame 0 is the earth, then one per
+    rod that is not fixed (a fixed rod moves with the earth's or its body's
+    frame)."""
+
+    owner: tuple  # per frame: ("earth", None) | ("rod", r)
+    trans: tuple  # per frame: "fixed" | "state" | "pin" | "motion"
+    rot: tuple  # per frame: "fixed" | "state" | "motion"
+    parent: tuple  # per frame: the frame its origin is pinned to, or None
+    trans_row: tuple  # per frame: its state row (position, velocity) or None
+    rot_rows: tuple  # per frame: its two state rows (quaternion, omega) or None
+    groups: tuple  # per group: its frames, the root first
+    dofs: tuple  # per group, per frame: (translation slice, rotation slice)
+    rod_frame: tuple  # per rod: the frame it moves with
+
+    def has_dof(self, f) -> bool:
+        return self.trans[f] == "state" or self.rot[f] == "state"
+
+
 class _Topology(eqx.Module):
     """Static index arrays of a network (NumPy, built at trace time).
 
-    Every line node sits on a "body" (a slot): a state row (interior nodes and free
-    points), a held point, or a rod end, in that order."""
+    Every line node sits on a "body" (a slot): a three-degree-of-freedom state
+    row (interior nodes and free points, in `tri_rows` order), a held point, or a
+    point of a rigid frame (rod ends), in that order."""
 
     n_state: int
-    body: np.ndarray  # line node -> body (state rows, held points, rod ends)
+    tri_rows: np.ndarray  # slot j < n_tri -> its state row
+    body: np.ndarray  # line node -> slot
     node_line: np.ndarray  # line node -> line
     prev: np.ndarray  # line node -> previous line node (itself at end A)
     next: np.ndarray  # line node -> next line node (itself at end B)
@@ -126,44 +157,147 @@ class _Topology(eqx.Module):
     seg_line: np.ndarray
     end_a: np.ndarray  # line -> its line node at end A
     end_b: np.ndarray
-    free_rows: np.ndarray  # free point (in `free` order) -> state row
+    free_rows: np.ndarray  # free point (in `free` order) -> slot
     free: tuple  # indices of the free points in `points`
     held: tuple  # indices of the held points in `points`
-    point_body: np.ndarray  # point -> body
-    rod_body: np.ndarray  # (rod, end A/B) -> body, (R, 2)
+    point_body: np.ndarray  # point -> slot
+    rod_body: np.ndarray  # (rod, end A/B) -> slot, (R, 2)
+    slot_frame: np.ndarray  # rigid slot (from n_tri + H) -> frame
     bending: _Bending
+    frames: _Frames
+    group_rows: tuple  # per group: its state rows
+
+    @property
+    def n_tri(self) -> int:
+        return self.tri_rows.shape[0]
 
     @property
     def n_bodies(self) -> int:
-        return self.n_state + len(self.held) + 2 * self.rod_body.shape[0]
+        return self.n_tri + len(self.held) + self.slot_frame.shape[0]
+
+    @property
+    def rigid_start(self) -> int:
+        return self.n_tri + len(self.held)
 
 
-def _topology(points, attach, segments, n_rods) -> _Topology:
+def _frames_of(rods):
+    """Frames (without rows) of the rods: see `_Frames`."""
+    owner, trans, rot, parent = [("earth", None)], ["fixed"], ["fixed"], [None]
+    rod_frame = []
+    for r, rod in enumerate(rods):
+        if rod.kind == "fixed":
+            rod_frame.append(0)
+            continue
+        rod_frame.append(len(owner))
+        owner.append(("rod", r))
+        trans.append({"pinned": "pin", "free": "state", "coupled": "motion",
+                      "coupled_pinned": "motion"}[rod.kind])  # fmt: skip
+        rot.append("motion" if rod.kind == "coupled" else "state")
+        parent.append(0 if rod.kind == "pinned" else None)
+    return owner, trans, rot, parent, rod_frame
+
+
+def _topology(points, attach, segments, rods) -> _Topology:
     free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
     held = tuple(i for i, p in enumerate(points) if not isinstance(p, FreePoint))
-    row = {}
+    owner, trans, rot, parent, rod_frame = _frames_of(rods)
+    has_dof = [t == "state" or r == "state" for t, r in zip(trans, rot)]
+    # groups: a frame with degrees of freedom and those pinned to it
+    group_of, groups = {}, []
+    for f in range(len(owner)):
+        if not has_dof[f]:
+            continue
+        p = parent[f]
+        if p is not None and has_dof[p]:
+            group_of[f] = group_of[p]
+            groups[group_of[f]].append(f)
+        else:
+            group_of[f] = len(groups)
+            groups.append(([p] if p is not None else []) + [f])
+
+    def frame_object(f):
+        return ("g", group_of[f]) if f in group_of else None
+
+    # rigid slots: both ends of every rod
+    slot_frame = [rod_frame[r] for r in range(len(rods)) for _ in range(2)]
+
+    def obj(e):
+        if isinstance(e, RodEnd):
+            return frame_object(rod_frame[e.rod])
+        return ("p", e) if e in free else None
+
+    # State rows: objects placed next to the lines that reach them; a line whose
+    # end B reaches an object already placed runs from B to A, so that the band
+    # stays narrow along chains of lines, points and rods.
+    rows_of = {}
     n = 0
-    interior = []
+    line_rows = []
+
+    def place(o):
+        nonlocal n
+        if o is None or o in rows_of:
+            return
+        if o[0] == "p":
+            rows_of[o] = [n]
+            n += 1
+        else:
+            rr = []
+            for f in groups[o[1]]:
+                if trans[f] == "state":
+                    rr.append(("t", f, n))
+                    n += 1
+                if rot[f] == "state":
+                    rr.append(("r", f, n))
+                    n += 2
+            rows_of[o] = rr
+
     for (a, b), N in zip(attach, segments):
-        if a in free and a not in row:
-            row[a] = n
-            n += 1
-        interior.append(n)
+        oa, ob = obj(a), obj(b)
+        reverse = ob in rows_of and oa not in rows_of and ob is not None
+        first, last = (ob, oa) if reverse else (oa, ob)
+        place(first)
+        rows = list(range(n, n + N - 1))
         n += N - 1
-        if b in free and b not in row:
-            row[b] = n
-            n += 1
+        line_rows.append(rows[::-1] if reverse else rows)
+        place(last)
     for i in free:
-        if i not in row:
-            row[i] = n
-            n += 1
+        place(("p", i))
+    for g in range(len(groups)):
+        place(("g", g))
     n_state = n
+    trans_row = [None] * len(owner)
+    rot_rows = [None] * len(owner)
+    for o, rr in rows_of.items():
+        if o[0] == "g":
+            for kind, f, row in rr:
+                if kind == "t":
+                    trans_row[f] = row
+                else:
+                    rot_rows[f] = (row, row + 1)
+    dofs = []
+    for frames in groups:
+        k, d = 0, []
+        for f in frames:
+            t_s = r_s = None
+            if trans[f] == "state":
+                t_s, k = slice(k, k + 3), k + 3
+            if rot[f] == "state":
+                r_s, k = slice(k, k + 3), k + 3
+            d.append((t_s, r_s))
+        dofs.append(tuple(d))
+    # slots: three-degree-of-freedom rows (free points, interior nodes), held
+    # points, rigid slots
+    tri_rows = sorted(
+        [rows_of[("p", i)][0] for i in free] + [r for rr in line_rows for r in rr]
+    )
+    tri_slot = {row: j for j, row in enumerate(tri_rows)}
+    n_tri = len(tri_rows)
     point_body = np.zeros(len(points), int)
     for i in free:
-        point_body[i] = row[i]
+        point_body[i] = tri_slot[rows_of[("p", i)][0]]
     for j, i in enumerate(held):
-        point_body[i] = n_state + j
-    rod_body = n_state + len(held) + np.arange(2 * n_rods).reshape(n_rods, 2)
+        point_body[i] = n_tri + j
+    rod_body = n_tri + len(held) + np.arange(2 * len(rods)).reshape(len(rods), 2)
 
     def slot(e):
         if isinstance(e, RodEnd):
@@ -174,8 +308,7 @@ def _topology(points, attach, segments, n_rods) -> _Topology:
     bend = {k: [] for k in _Bending.__dataclass_fields__}
     m = s = 0
     for k, ((a, b), N) in enumerate(zip(attach, segments)):
-        rows = [slot(a)] + [interior[k] + i for i in range(N - 1)]
-        rows.append(slot(b))
+        rows = [slot(a)] + [tri_slot[r] for r in line_rows[k]] + [slot(b)]
         body += rows
         node_line += [k] * (N + 1)
         prev += [m] + [m + i - 1 for i in range(1, N + 1)]
@@ -206,8 +339,27 @@ def _topology(points, attach, segments, n_rods) -> _Topology:
             for k, v in bend.items()
         }
     )
+    frames = _Frames(
+        owner=tuple(owner),
+        trans=tuple(trans),
+        rot=tuple(rot),
+        parent=tuple(parent),
+        trans_row=tuple(trans_row),
+        rot_rows=tuple(rot_rows),
+        groups=tuple(tuple(g) for g in groups),
+        dofs=tuple(dofs),
+        rod_frame=tuple(rod_frame),
+    )
+    # the state rows of each group (a rigid slot stands for all of them)
+    group_rows = []
+    for g in range(len(groups)):
+        rr = rows_of.get(("g", g), [])
+        group_rows.append(
+            tuple(x for kind, _, r0 in rr for x in range(r0, r0 + (kind == "r") + 1))
+        )
     return _Topology(
         n_state=n_state,
+        tri_rows=arr(tri_rows),
         body=arr(body),
         node_line=arr(node_line),
         prev=arr(prev),
@@ -216,12 +368,15 @@ def _topology(points, attach, segments, n_rods) -> _Topology:
         seg_line=arr(seg_line),
         end_a=arr(end_a),
         end_b=arr(end_b),
-        free_rows=arr([row[i] for i in free]),
+        free_rows=arr([point_body[i] for i in free]),
         free=free,
         held=held,
         point_body=arr(point_body),
-        rod_body=arr(rod_body).reshape(n_rods, 2),
+        rod_body=arr(rod_body).reshape(len(rods), 2),
+        slot_frame=arr(slot_frame),
         bending=bending,
+        frames=frames,
+        group_rows=tuple(group_rows),
     )
 
 
@@ -252,6 +407,8 @@ class _State(eqx.Module):
     held_vel: Array
     lengths: Array  # unstretched lengths of the lines (n_lines,)
     curvature: Array | None  # (M,) bending curvature at the nodes, 1/m
+    frames: list  # rigid.Frame of every rigid frame
+    rods: list  # per rod: (end A, axis, length, frame)
 
 
 class LineNetwork(AbstractModel):
@@ -300,33 +457,30 @@ class LineNetwork(AbstractModel):
     accepts: ClassVar[tuple[type, ...]] = (Gravity, Buoyancy, AbstractChainLoad)
 
     def __check_init__(self):
-        if not isinstance(self.points, tuple) or not self.points:
-            raise ValueError(
-                f"`points` must be a non-empty tuple; got {self.points!r}."
-            )
+        if not isinstance(self.points, tuple):
+            raise ValueError(f"`points` must be a tuple; got {self.points!r}.")
         for i, p in enumerate(self.points):
             if not isinstance(p, (AbstractEnd, FreePoint)):
                 raise ValueError(
                     f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd or "
                     f"FreePoint; got {p!r}."
                 )
+        if not isinstance(self.rods, tuple) or not all(
+            isinstance(r, Rod) for r in self.rods
+        ):
+            raise ValueError(f"`rods` must be a tuple of Rods; got {self.rods!r}.")
         n = len(self.attach)
-        if n == 0:
+        if n == 0 and not self.rods:
             raise ValueError("`attach` must name at least one line (a, b).")
         if len(self.segments) != n:
             raise ValueError(
                 f"`segments` must have one entry per line ({n}); got {self.segments!r}."
             )
-        if not isinstance(self.rods, tuple) or not all(
-            isinstance(r, Rod) for r in self.rods
-        ):
-            raise ValueError(f"`rods` must be a tuple of Rods; got {self.rods!r}.")
         for j, r in enumerate(self.rods):
-            if r.kind != "fixed" or r.body is not None:
+            if r.body is not None:
                 raise ValueError(
-                    f"`rods[{j}]`: a {r.kind!r} rod"
-                    + (" on a body" if r.body is not None else "")
-                    + " is not simulated; valid: 'fixed' rods (clamps) on the earth."
+                    f"`rods[{j}]`: a rod on a body is not simulated; valid: rods on "
+                    "the earth (body None)."
                 )
             if r.segments == 0:
                 raise ValueError(
@@ -382,7 +536,7 @@ class LineNetwork(AbstractModel):
 
     @property
     def topology(self) -> _Topology:
-        return _topology(self.points, self.attach, self.segments, len(self.rods))
+        return _topology(self.points, self.attach, self.segments, self.rods)
 
     def state_shape(self):
         return (self.topology.n_state, 6)
@@ -391,24 +545,45 @@ class LineNetwork(AbstractModel):
         return y
 
     def structure(self, effects):
-        """The node band of the state's ordering (lines, then free points), the
-        (r, r') layout, and a Jacobian per implicit stage (the stiff axial forces
-        turn with the lines); BDF keeps its Jacobian across steps (mooring chains
-        move slowly). Bending couples each node to the nodes two away along its
-        line (a joint's forces act on its three nodes and depend on all three)."""
+        """The node band of the state's ordering (lines, free points and rigid
+        objects placed next to the lines that reach them), the (r, r') layout
+        (where nothing rotates), and a Jacobian per implicit stage (the stiff
+        axial forces turn with the lines); BDF keeps its Jacobian across steps
+        (mooring chains move slowly). Bending couples each node to the nodes two
+        away along its line; a rigid object's rows couple to one another and to
+        the nodes next to the line ends on it."""
         del effects
         top = self.topology
+        n_tri, start = top.n_tri, top.rigid_start
+        frames = top.frames
+        group_of = {f: g for g, fs in enumerate(frames.groups) for f in fs
+                    if frames.has_dof(f)}  # fmt: skip
+
+        def rows(slot):
+            if slot < n_tri:
+                return (int(top.tri_rows[slot]),)
+            if slot < start:
+                return ()
+            g = group_of.get(int(top.slot_frame[slot - start]))
+            return () if g is None else top.group_rows[g]
+
         groups = [[top.body[top.seg_lo], top.body[top.seg_lo + 1]]]
         if self.EI is not None:
             m = top.bending.inner_node
             groups.append([top.body[m - 1], top.body[m], top.body[m + 1]])
         width = 1
         for group in groups:
-            for a in group:
-                for b in group:
-                    both = (a < top.n_state) & (b < top.n_state)
-                    width = max(width, int(np.max(np.abs(a - b)[both], initial=0)))
-        return SolverStructure(bandwidth=width, second_order=3, stage_jacobians=True)
+            for j in range(len(group[0])):
+                rr = [r for col in group for r in rows(int(col[j]))]
+                if rr:
+                    width = max(width, max(rr) - min(rr))
+        for rr in top.group_rows:
+            if rr:
+                width = max(width, max(rr) - min(rr))
+        second_order = 0 if frames.groups else 3
+        return SolverStructure(
+            bandwidth=width, second_order=second_order, stage_jacobians=True
+        )
 
     def damping_BA(self):
         """Internal damping BA per line, N s (MoorDyn: -zeta (L/N) sqrt(EA w) for a
@@ -432,24 +607,14 @@ class LineNetwork(AbstractModel):
         return jnp.stack(vals), jnp.stack(rates)
 
     def held_kinematics(self, t):
-        """Positions, velocities, accelerations of the held points and then of the
-        rod ends (A, B of each rod), `(H + 2 R, 3)` each."""
+        """Positions, velocities, accelerations of the held points, `(H, 3)`
+        each."""
         held = [self.points[i].kinematics(t) for i in self.topology.held]
         out = []
         for name in ("position", "velocity", "acceleration"):
             rows = [getattr(k, name) for k in held]
             out.append(jnp.stack(rows) if rows else jnp.zeros((0, 3)))
-        if self.rods:
-            ends = jnp.stack([jnp.stack([r.end_a, r.end_b]) for r in self.rods])
-            ends = ends.reshape(-1, 3)
-            zero = jnp.zeros_like(ends)
-            out = [jnp.concatenate([o, e]) for o, e in zip(out, (ends, zero, zero))]
         return tuple(out)
-
-    def rod_axes(self, t):
-        """Unit axis (A to B) of each rod, `(R, 3)`."""
-        del t
-        return jnp.stack([r.axis() for r in self.rods])
 
     def _free_params(self):
         free = [self.points[i] for i in self.topology.free]
@@ -458,6 +623,94 @@ class LineNetwork(AbstractModel):
             return z, z, z, z
         stack = lambda name: jnp.stack([getattr(p, name) for p in free])
         return stack("mass"), stack("volume"), stack("CdA"), stack("Ca")
+
+    # -- rigid frames
+    def _frame_start(self, f):
+        """Initial origin and orientation of frame f."""
+        kind, i = self.topology.frames.owner[f]
+        if kind == "earth":
+            return jnp.zeros(3), jnp.eye(3)
+        return self.rods[i].end_a, jnp.eye(3)
+
+    def initial_rigid_rows(self, y):
+        """`y` with the rows of the rigid frames at their initial pose, at rest."""
+        frames = self.topology.frames
+        for f in range(len(frames.owner)):
+            p0, R0 = self._frame_start(f)
+            if frames.trans_row[f] is not None:
+                y = y.at[frames.trans_row[f]].set(jnp.concatenate([p0, jnp.zeros(3)]))
+            if frames.rot_rows[f] is not None:
+                r1, r2 = frames.rot_rows[f]
+                q = jnp.asarray(matrix_quat(np.asarray(R0)))
+                y = y.at[r1].set(jnp.concatenate([q[1:], jnp.zeros(3)]))
+                y = y.at[r2].set(jnp.zeros(6).at[0].set(q[0]))
+        return y
+
+    def frames(self, t, y):
+        """The kinematics (`rigid.Frame`) of every rigid frame at `(t, y)`; the
+        accelerations are those of the prescribed motions (zero where the state
+        moves the frame)."""
+        top = self.topology
+        fr = top.frames
+        out = []
+        z = jnp.zeros(3)
+        for f in range(len(fr.owner)):
+            p0, R0 = self._frame_start(f)
+            kind, i = fr.owner[f]
+            motion = self.rods[i].motion if kind == "rod" else None
+            if motion is not None:
+                mf = motion.frame(t, p0, R0)
+            else:
+                mf = Frame(p0, R0, z, z, z, z)
+            p, v, a = p0, z, z
+            if fr.trans[f] == "state":
+                row = y[fr.trans_row[f]]
+                p, v = row[:3], row[3:]
+            elif fr.trans[f] == "motion":
+                p, v, a = mf.position, mf.velocity, mf.acceleration
+            elif fr.trans[f] == "pin":
+                P = out[fr.parent[f]]
+                rho = P.rotation @ (p0 - self._frame_start(fr.parent[f])[0])
+                p = P.position + rho
+                v = P.velocity + jnp.cross(P.omega, rho)
+                a = (P.acceleration + jnp.cross(P.alpha, rho)
+                     + jnp.cross(P.omega, jnp.cross(P.omega, rho)))  # fmt: skip
+            R, w, al = R0, z, z
+            if fr.rot[f] == "state":
+                r1, r2 = fr.rot_rows[f]
+                q = jnp.concatenate([y[r2, :1], y[r1, :3]])
+                R, w = quat_matrix(q), y[r1, 3:]
+            elif fr.rot[f] == "motion":
+                R, w, al = mf.rotation, mf.omega, mf.alpha
+            out.append(Frame(p, R, v, w, a, al))
+        return out
+
+    def _rod_geometry(self, frames):
+        """End A, unit axis, length and frame of every rod, in earth axes."""
+        fr = self.topology.frames
+        out = []
+        for r, rod in enumerate(self.rods):
+            f = fr.rod_frame[r]
+            F = frames[f]
+            local_a = rod.end_a - self._frame_start(f)[0]
+            axis0 = rod.axis()
+            a = F.position + F.rotation @ local_a
+            q = F.rotation @ axis0
+            out.append((a, q, rod.length, f))
+        return out
+
+    def _rigid_slots(self, frames, rods):
+        """Positions and velocities of the rigid slots (rod ends), `(K, 3)`."""
+        if not rods:
+            z = jnp.zeros((0, 3))
+            return z, z
+        pos, vel = [], []
+        for a, q, L, f in rods:
+            F = frames[f]
+            va = F.velocity + jnp.cross(F.omega, a - F.position)
+            pos += [a, a + L * q]
+            vel += [va, va + jnp.cross(F.omega, L * q)]
+        return jnp.stack(pos), jnp.stack(vel)
 
     # -- one evaluation
     def _state(self, t, y, effects, env) -> _State:
@@ -469,8 +722,12 @@ class LineNetwork(AbstractModel):
                     f"Seabed); got {type(e).__name__} in `effects`."
                 )
         hp, hv, ha = self.held_kinematics(t)
-        Bp = jnp.concatenate([y[:, :3], hp], axis=0)
-        Bv = jnp.concatenate([y[:, 3:], hv], axis=0)
+        frames = self.frames(t, y) if self.rods else []
+        rods = self._rod_geometry(frames)
+        sp, sv = self._rigid_slots(frames, rods)
+        tri = y[top.tri_rows]
+        Bp = jnp.concatenate([tri[:, :3], hp, sp], axis=0)
+        Bv = jnp.concatenate([tri[:, 3:], hv, sv], axis=0)
         R, V = Bp[top.body], Bv[top.body]
         lo, hi = top.seg_lo, top.seg_lo + 1
         sl = top.seg_line
@@ -503,7 +760,7 @@ class LineNetwork(AbstractModel):
         if self.EI is not None:
             bend = top.bending
             if len(bend.clamp_a_node) or len(bend.clamp_b_node):
-                axes = self.rod_axes(t)
+                axes = jnp.stack([g[1] for g in rods])
                 t_a = bend.clamp_a_sign[:, None] * axes[bend.clamp_a_rod]
                 t_b = bend.clamp_b_sign[:, None] * axes[bend.clamp_b_rod]
                 # a clamped end node's axis is the rod's (MoorDyn)
@@ -566,22 +823,106 @@ class LineNetwork(AbstractModel):
             held_vel=hv,
             lengths=Lt,
             curvature=curvature,
+            frames=frames,
+            rods=rods,
         )
 
-    def _accelerations(self, st: _State):
-        n = self.topology.n_state
-        return _solve3(st.body_mass[:n], st.body_force[:n])
+    def _rod_loads(self, st, r, t, effects, env):
+        """MoorDyn's loads on rod r at the state's pose (`rods.rod_loads`)."""
+        loads = {}
+        for e in effects:
+            if isinstance(e, Gravity):
+                loads["gravity"] = e
+            elif isinstance(e, Buoyancy):
+                loads["buoyancy"] = e
+            elif isinstance(e, Drag):
+                loads["drag"] = e
+            elif isinstance(e, Seabed):
+                loads["seabed"] = e
+        a, q, _, f = st.rods[r]
+        F = st.frames[f]
+        va = F.velocity + jnp.cross(F.omega, a - F.position)
+        return rod_loads(self.rods[r], a, q, va, F.omega, t, env, loads)
+
+    def _rates(self, t, y, st: _State, effects, env):
+        """dy/dt, and the acceleration of every slot `(n_bodies, 3)`."""
+        top = self.topology
+        n_tri, start = top.n_tri, top.rigid_start
+        acc = _solve3(st.body_mass[:n_tri], st.body_force[:n_tri])
+        tri = y[top.tri_rows]
+        dy = (
+            jnp.zeros_like(y)
+            .at[top.tri_rows]
+            .set(jnp.concatenate([tri[:, 3:], acc], axis=1))
+        )
+        if not self.rods:
+            return dy, jnp.concatenate([acc, st.held_acc], axis=0)
+        fr = top.frames
+        frames = list(st.frames)
+        acc_f = [F.acceleration for F in frames]
+        alp_f = [F.alpha for F in frames]
+        for g, members in enumerate(fr.groups):
+            local = {f: k for k, f in enumerate(members)}
+            dofs = fr.dofs[g]
+            parents = [local.get(fr.parent[f]) for f in members]
+            pins = []
+            for f in members:
+                p = fr.parent[f]
+                pins.append(None if p is None else frames[f].position
+                            - frames[p].position)  # fmt: skip
+            sets, rots = [], []
+            for r in range(len(self.rods)):
+                f = fr.rod_frame[r]
+                if f in local and fr.has_dof(f):
+                    ld = self._rod_loads(st, r, t, effects, env)
+                    sets.append(PointSet(local[f], ld.positions, ld.masses, ld.forces))
+                    rots.append(Rotational(local[f], ld.inertia, ld.moment))
+            slots = [s for s in range(top.slot_frame.shape[0])
+                     if int(top.slot_frame[s]) in local
+                     and fr.has_dof(int(top.slot_frame[s]))]  # fmt: skip
+            for s in slots:
+                k = start + s
+                pos = self._rigid_slots(frames, st.rods)[0][s]
+                sets.append(
+                    PointSet(local[int(top.slot_frame[s])], pos[None],
+                             st.body_mass[k][None], st.body_force[k][None])
+                )  # fmt: skip
+            _, acc_g, alp_g = group_accelerations(
+                [frames[f] for f in members], dofs, parents, pins, sets, rots
+            )
+            for f, k in local.items():
+                acc_f[f], alp_f[f] = acc_g[k], alp_g[k]
+                F = frames[f]
+                if fr.trans[f] == "state":
+                    dy = dy.at[fr.trans_row[f]].set(
+                        jnp.concatenate([F.velocity, acc_g[k]])
+                    )
+                if fr.rot[f] == "state":
+                    r1, r2 = fr.rot_rows[f]
+                    qd = quat_rate(jnp.concatenate([y[r2, :1], y[r1, :3]]), F.omega)
+                    dy = dy.at[r1].set(jnp.concatenate([qd[1:], alp_g[k]]))
+                    dy = dy.at[r2, 0].set(qd[0])
+        # accelerations of the rigid slots
+        pos, _ = self._rigid_slots(frames, st.rods)
+        slot_acc = []
+        for s in range(top.slot_frame.shape[0]):
+            f = int(top.slot_frame[s])
+            F = frames[f]
+            rho = pos[s] - F.position
+            slot_acc.append(acc_f[f] + jnp.cross(alp_f[f], rho)
+                            + jnp.cross(F.omega, jnp.cross(F.omega, rho)))  # fmt: skip
+        body_acc = jnp.concatenate([acc, st.held_acc, jnp.stack(slot_acc)], axis=0)
+        return dy, body_acc
 
     def vector_field(self, t, y, effects, env):
         st = self._state(t, y, effects, env)
-        return jnp.concatenate([y[:, 3:], self._accelerations(st)], axis=1)
+        return self._rates(t, y, st, effects, env)[0]
 
-    def end_forces(self, st: _State, acc):
+    def end_forces(self, st: _State, body_acc):
         """Forces of each line on its end points A and B, `(n_lines, 3)` each, N:
         the end node's segment force and loads less its inertia (it moves with the
-        point)."""
+        point); `body_acc` the accelerations of the slots (`_rates`)."""
         top = self.topology
-        body_acc = jnp.concatenate([acc, st.held_acc], axis=0)
 
         def at(nodes):
             a = body_acc[top.body[nodes]]
@@ -596,15 +937,16 @@ class LineNetwork(AbstractModel):
         `end_force_b` (`(n_lines, 3)`, N, on the points) and their magnitudes
         `tension_a`, `tension_b` (`(n_lines,)`), `point_force` (net force of the
         lines on each point, `(n_points, 3)`), `lengths` (unstretched, m),
-        `positions` (the free bodies, `(n, 3)`) and `energy` (kinetic + elastic +
-        the potentials of the scene's constant loads, weight and buoyancy, J;
-        without bending, whose nodal forces have no potential). With rods:
-        `rod_end_force` (the lines' force on each rod's ends A and B,
-        `(R, 2, 3)`, N); with bending stiffness: `curvature` at every line node
-        (`(M,)`, 1/m)."""
+        `positions` (the state rows' first three columns, `(n, 3)`) and `energy`
+        (kinetic + elastic + the potentials of the scene's constant loads, weight
+        and buoyancy, J; without bending, whose nodal forces have no potential,
+        and only for networks without rods). With rods: `rod_end_force` (the
+        lines' force on each rod's ends A and B, `(R, 2, 3)`, N), `rod_end_a` and
+        `rod_axis` (`(R, 3)`), `rod_nodes` (every rod node, rod by rod, m); with
+        bending stiffness: `curvature` at every line node (`(M,)`, 1/m)."""
         st = self._state(t, y, effects, env)
-        acc = self._accelerations(st)
-        fa, fb = self.end_forces(st, acc)
+        _, body_acc = self._rates(t, y, st, effects, env)
+        fa, fb = self.end_forces(st, body_acc)
         top = self.topology
         pf = jnp.zeros((len(self.points), 3))
         rf = jnp.zeros((2 * len(self.rods), 3))
@@ -621,22 +963,6 @@ class LineNetwork(AbstractModel):
                 )
                 rf = rf.at[idx].add(f[np.asarray(at_rod)])
         kin = st.kin
-        v = y[:, 3:]
-        ke = 0.5 * jnp.sum(
-            jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
-        )
-        EAs = self.EA[top.seg_line]
-        elastic = 0.5 * jnp.sum(EAs * st.seg_l * jnp.maximum(st.seg_strain, 0.0) ** 2)
-        # The potential of the constant loads (weight, buoyancy): minus their work,
-        # over the nodes that move (not those on held points) and the free points.
-        pot = jnp.zeros(())
-        inner = np.ones(top.body.shape[0], bool)
-        inner[top.body >= top.n_state] = False
-        for e in effects:
-            if e.constant:
-                f = e.forces(t, kin, env)
-                work = jnp.where(inner, _dot(f.nodes, kin.positions), 0.0)
-                pot = pot - jnp.sum(work) - jnp.sum(_dot(f.points, kin.point_positions))
         out = {
             "nodes": kin.positions,
             "node_velocities": kin.velocities,
@@ -649,10 +975,38 @@ class LineNetwork(AbstractModel):
             "tension_b": safe_norm(fb),
             "point_force": pf,
             "lengths": st.lengths,
-            "energy": ke + elastic + pot,
         }
+        if not self.rods:
+            v = y[:, 3:]
+            ke = 0.5 * jnp.sum(
+                jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
+            )
+            EAs = self.EA[top.seg_line]
+            strain = jnp.maximum(st.seg_strain, 0.0)
+            elastic = 0.5 * jnp.sum(EAs * st.seg_l * strain**2)
+            # The potential of the constant loads (weight, buoyancy): minus their
+            # work, over the nodes that move (not those on held points) and the
+            # free points.
+            pot = jnp.zeros(())
+            inner = np.ones(top.body.shape[0], bool)
+            inner[top.body >= top.n_state] = False
+            for e in effects:
+                if e.constant:
+                    f = e.forces(t, kin, env)
+                    work = jnp.where(inner, _dot(f.nodes, kin.positions), 0.0)
+                    pot = (pot - jnp.sum(work)
+                           - jnp.sum(_dot(f.points, kin.point_positions)))  # fmt: skip
+            out["energy"] = ke + elastic + pot
         if self.rods:
             out["rod_end_force"] = rf.reshape(len(self.rods), 2, 3)
+            out["rod_end_a"] = jnp.stack([g[0] for g in st.rods])
+            out["rod_axis"] = jnp.stack([g[1] for g in st.rods])
+            out["rod_nodes"] = jnp.concatenate(
+                [
+                    g[0] + jnp.linspace(0, 1, r.segments + 1)[:, None] * (g[2] * g[1])
+                    for r, g in zip(self.rods, st.rods)
+                ]
+            )
         if st.curvature is not None:
             out["curvature"] = st.curvature
         return out
@@ -736,7 +1090,8 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     **Returns:** state `(n, 6)`."""
     env = Environment() if env is None else env
     top = model.topology
-    hp = np.asarray(model.held_kinematics(jnp.asarray(t0, jnp.float64))[0])
+    t0 = jnp.asarray(t0, jnp.float64)
+    hp = np.asarray(model.held_kinematics(t0)[0])
     pos = np.zeros((top.n_state, 3))
     pts = []
     for i, p in enumerate(model.points):
@@ -745,11 +1100,16 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
         else:
             pts.append(hp[top.held.index(i)])
     for i, r in zip(top.free, top.free_rows):
-        pos[r] = pts[i]
+        pos[top.tri_rows[r]] = pts[i]
+    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
+    ends = np.zeros((0, 3))
+    if model.rods:
+        frames = model.frames(t0, rigid)
+        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
 
     def at(e):
         if isinstance(e, RodEnd):
-            return hp[len(top.held) + 2 * e.rod + (e.end == "B")]
+            return ends[2 * e.rod + (e.end == "B")]
         return pts[e]
 
     bed = [e for e in effects if isinstance(e, Seabed)]
@@ -766,15 +1126,17 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
         # the stretched line: the catenary of the length under that tension
         stretched = float(L[k]) * (1.0 + max(T, 0.0) / EA)
         shape, _ = _catenary(at(a), at(b), stretched, w, N, seabed_z, EA)
-        rows = top.body[model.line_nodes(k)[1:-1]]
+        rows = top.tri_rows[top.body[model.line_nodes(k)[1:-1]]]
         pos[rows] = shape[1:-1]
-    return jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    y = jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    return model.initial_rigid_rows(y)
 
 
 def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
     y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
     st = model._state(t0, y, effects, env)
-    f = st.body_force[: model.topology.n_state]
+    top = model.topology
+    f = jnp.zeros_like(x).at[top.tri_rows].set(st.body_force[: top.n_tri])
     return jnp.where(solve_rows[:, None], f, 0.0)
 
 
@@ -897,9 +1259,11 @@ def equilibrium(
     env = Environment() if env is None else env
     effects = tuple(effects)
     top = model.topology
-    solve_rows = np.ones(top.n_state, bool)
+    # the rigid objects are held at their poses
+    solve_rows = np.zeros(top.n_state, bool)
+    solve_rows[top.tri_rows] = True
     if free_points == "hold":
-        solve_rows[top.free_rows] = False
+        solve_rows[top.tri_rows[top.free_rows]] = False
     solve_rows = jnp.asarray(solve_rows)
     if y0 is None:
         y0 = initial_shape(model, effects, env, t0)

@@ -945,14 +945,18 @@ def deck_scene(
 
 
 def _deck_rods(deck) -> tuple:
-    """The deck's rods as `Rod`s (fixed rods on the earth: clamps)."""
+    """The deck's rods as `Rod`s."""
     rods = []
     for r in deck.rods:
-        if r["kind"] != "fixed" or r["body"] is not None:
-            where = f"on body {r['body']}" if r["body"] is not None else r["kind"]
+        if r["body"] is not None:
             raise ValueError(
-                f"{deck.path}: line {r['line']}: rod {r['id']} ({where}) is not "
-                "simulated yet; valid: rods fixed to the earth (Fixed/Anchor)."
+                f"{deck.path}: line {r['line']}: rod {r['id']} (on body {r['body']}) "
+                "is not simulated yet; valid: rods on the earth."
+            )
+        if r["segments"] == 0:
+            raise ValueError(
+                f"{deck.path}: line {r['line']}: rod {r['id']} has NumSegs 0 (a "
+                "zero-length joint), which is not simulated; valid: NumSegs >= 1."
             )
         t = deck.rod_types[r["type"]]
         rods.append(
@@ -1000,7 +1004,7 @@ def _rest_observables(scene):
     y = scene.y0.at[:, 3:].set(0.0)
     st = model._state(scene.t0, y, scene.effects, scene.env)
     st = eqx.tree_at(lambda s: s.held_acc, st, jnp.zeros_like(st.held_acc))
-    zero = jnp.zeros((model.topology.n_state, 3))
+    zero = jnp.zeros((model.topology.n_bodies, 3))
     fa, fb = model.end_forces(st, zero)
     return {"tension_a": jnp.linalg.norm(fa, axis=1),
             "tension_b": jnp.linalg.norm(fb, axis=1)}  # fmt: skip
