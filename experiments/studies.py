@@ -543,6 +543,30 @@ STUDIES = (
         ),
     ),
     Study(
+        "compile_options",
+        "compile_options.py",
+        "XLA:CPU compile options against compile and run time of four solves",
+        "1 min / 10 min",
+        PENDULUM,
+        (Run((), _files("compile_options")),),
+    ),
+    Study(
+        "first_result",
+        "first_result.py",
+        "time to the first result of each README example, preset and the command, "
+        "cold and warm cache",
+        "2 min / 25 min",
+        (
+            *PENDULUM,
+            *TETHER,
+            *TANDEM,
+            *LINES,
+            "jaxstring/_programs.py",
+            "jaxstring/_config.py",
+        ),
+        (Run((), _files("first_result")),),
+    ),
+    Study(
         "solve_defaults",
         "solve_defaults.py",
         "the identification defaults: least squares at rtol 1e-6, 1e-7, 1e-8",

@@ -386,6 +386,7 @@ def value_and_grad(
     getters, theta, pos, frozen, config, ts = _setup(
         scene, loss_fn, params, False, simulate, config, count_steps=False
     )
+    theta, frozen, config, ts = config.placed((theta, frozen, config, ts))
     value, grad = _jit_value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts)
     return float(value), {g.label: np.asarray(g(grad)) for g in getters}
 
@@ -468,6 +469,7 @@ def fit(
         scene, loss_fn, params, positive, simulate, config, count_steps=True
     )
     adj = config.adjoint_for("gradient")
+    theta, frozen, config, ts = config.placed((theta, frozen, config, ts))
     if optimizer is None:
         optimizer = optax.adam(learning_rate)
     optimizer = optax.with_extra_args_support(optimizer)
@@ -580,6 +582,7 @@ def gauss_newton(
     ts = config.save_times(scene.t0, scene.t1)
     config = config.replace(ts=None)
     p0 = jnp.stack([jnp.asarray(g(scene), dtype=jnp.float64) for g in getters])
+    p0, scene, config, ts = config.placed((p0, scene, config, ts))
     J, r = _gn_jacobian(p0, scene, tuple(getters), residual_fn, config, ts)
     J, r = np.asarray(J), np.asarray(r)
     n, m = r.size, p0.size

@@ -302,6 +302,7 @@ def least_squares(
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)
     ]
+    problem, theta0 = config.placed((problem, theta0))
     start = time.perf_counter()
     # The residuals' structure, before anything compiles.
     out = eqx.filter_eval_shape(problem.residuals, theta0)

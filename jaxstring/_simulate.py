@@ -63,4 +63,5 @@ def simulate(
     config = solve_config("simulate", config, **options)
     config.check_scene(scene)
     ts = config.save_times(scene.t0, scene.t1)
-    return solve_compiled(scene, config.replace(ts=None), ts)
+    scene, solve_config_, ts = config.placed((scene, config.replace(ts=None), ts))
+    return solve_compiled(scene, solve_config_, ts)

@@ -11,6 +11,7 @@ from typing import Any
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from ._solvers.registry import check_solver, is_adaptive
@@ -47,6 +48,7 @@ SOLVE_DEFAULTS: dict[str, dict[str, Any]] = {
         "checkpoints": "auto",
         "step_control": "auto",
         "progress": False,
+        "device": "auto",
     },
     "identify": {},
     "sweep": {},
@@ -126,6 +128,9 @@ class SolveConfig(eqx.Module):
     - `step_control`: `"auto"`, `"pid"` or `"newton-limited"` (see
       `jaxstring.NewtonLimitedController`).
     - `progress`: print a text progress meter.
+    - `device`: where a single solve runs: `"auto"` (the host CPU, also on a host
+      with a GPU: one solve's small kernels run faster there; a sweep's members
+      go to the GPUs), `"default"` (JAX's default device) or a `jax.Device`.
 
     Tolerances, `dt0` and `ts` are arrays (traced: a new value reuses the compiled
     solve); every other field is structure. Build one from a purpose's defaults
@@ -146,6 +151,7 @@ class SolveConfig(eqx.Module):
     checkpoints: Any = eqx.field(static=True, default="auto")
     step_control: str = eqx.field(static=True, default="auto")
     progress: bool = eqx.field(static=True, default=False)
+    device: Any = eqx.field(static=True, default="auto")
 
     def __check_init__(self):
         check_solver(self.solver)
@@ -165,6 +171,8 @@ class SolveConfig(eqx.Module):
             check_choice("adjoint", self.adjoint, ADJOINTS)
         if self.checkpoints not in (None, "auto"):
             check_int("checkpoints", self.checkpoints, 1)
+        if not isinstance(self.device, jax.Device):
+            check_choice("device", self.device, ("auto", "default"))
 
     @classmethod
     def default(cls, purpose: str = "simulate") -> "SolveConfig":
@@ -215,6 +223,18 @@ class SolveConfig(eqx.Module):
             return dfx.ForwardMode()
         checkpoints = self.checkpoints if isinstance(self.checkpoints, int) else None
         return make_adjoint(self.adjoint, checkpoints)
+
+    def placed(self, tree):
+        """`tree` (a solve's arguments) on the configuration's device: the host CPU
+        under "auto", as it is under "default"."""
+        if self.device == "default":
+            return tree
+        device = self.device
+        if device == "auto":
+            if jax.default_backend() == "cpu":
+                return tree
+            device = jax.devices("cpu")[0]
+        return jax.device_put(tree, device)
 
     def check_scene(self, scene) -> None:
         """Refuse settings that do not fit `scene` (save times outside its span; an

@@ -64,6 +64,7 @@ between its members (profile: docs/numerics.md, "Sweeps: vmap, groups and
 lockstep").
 """
 
+import concurrent.futures as cf
 import copy
 import dataclasses
 import math
@@ -78,6 +79,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from . import _distribute
 from ._blas import single_blas_thread
 from ._fit import _follow, parameter_names, resolve
 from ._integrate import integrate, solve
@@ -114,6 +116,8 @@ class SweepResult(eqx.Module):
       re-run one solve each, to isolate the failure).
     - `time`: seconds for the call (compilation included on a first call; a second
       call with the same structure reuses the compiled sweep).
+    - `processes`: worker processes of this host that ran the members (1: this
+      process; 0: a user's executor).
     """
 
     values: dict
@@ -126,6 +130,7 @@ class SweepResult(eqx.Module):
     n_devices: int
     time: float
     mode: str = "vmap"
+    processes: int = 1
 
 
 def _default_fn(traj, scene):
@@ -145,8 +150,11 @@ def _member(vals, scene, getters, fn, config, ts):
 
 
 def _run_group(vals, scene, getters, fn, config, ts, batch_size):
+    """The members in groups of `batch_size` (a vmap each, one after the other);
+    the callers make the number of members a multiple of it, so that every member
+    is integrated by the same group program wherever it runs."""
     member = lambda v: _member(v, scene, getters, fn, config, ts)
-    if batch_size is None or batch_size >= vals[0].shape[0]:
+    if batch_size >= vals[0].shape[0]:
         return jax.vmap(member)(vals)
     return jax.lax.map(member, vals, batch_size=batch_size)
 
@@ -504,6 +512,11 @@ def _index(i, shape):
     return tuple(int(k) for k in np.unravel_index(int(i), shape))
 
 
+AUTO_MEMBERS_PER_CORE = 16
+"""`processes="auto"` uses every core for sweeps of at least this many members per
+core (fewer do not pay for starting the workers: docs/performance.md, "Sweeps")."""
+
+
 def _check_devices(devices):
     if isinstance(devices, str):
         if devices != "auto":
@@ -525,6 +538,87 @@ def _check_devices(devices):
     )
 
 
+def _on_devices(local, arrays, mine, scene, getters, fn, config, ts, batch_size,
+                devices, order):  # fmt: skip
+    """The members `mine` on this process's devices: one shard per device (GPUs
+    side by side). Returns (outputs in the order of `mine`, devices used)."""
+    if devices == "auto":
+        devices = jax.local_devices()
+    elif devices is None or devices == 1:
+        devices = jax.local_devices()[:1]
+    devices = list(devices)
+    m = len(mine)
+    n_dev = max(1, min(len(devices), math.ceil(m / batch_size)))
+    devices = devices[:n_dev]
+    n_pad = math.ceil(m / (n_dev * batch_size)) * n_dev * batch_size
+    # Pad by repeating the last member (dropped again below).
+    idx = np.concatenate([np.arange(m), np.full(n_pad - m, m - 1)])
+    if n_dev > 1 and order == "sort":
+        # Contiguous blocks go to the devices: interleave whole groups, so that
+        # each device gets members from across the range (similar total work per
+        # device) in the groups they have everywhere else.
+        groups = idx.reshape(-1, n_dev, batch_size)
+        idx = groups.transpose(1, 0, 2).ravel()
+    vals = tuple(jnp.asarray(a[mine][idx]) for a in arrays)
+    if n_dev > 1:
+        out = _sweep_devices(
+            local, vals, scene, getters, fn, config, ts, batch_size, devices
+        )
+    else:
+        out = local(vals, scene, getters, fn, config, ts, batch_size)
+    out = jax.block_until_ready(out)
+    # Each member's position in the padded batch: its first occurrence.
+    where = np.empty(m, dtype=np.int64)
+    where[idx[::-1]] = np.arange(n_pad)[::-1]
+    return jtu.tree_map(lambda x: np.asarray(x)[where], out), n_dev
+
+
+CPU_GROUP = 16
+"""`batch_size="auto"` on a CPU: groups of this many members (measured:
+docs/performance.md, "Sweeps")."""
+
+GPU_ONE_GROUP = 4096
+"""`batch_size="auto"` on a GPU: up to this many members per device run as one
+group; more are grouped to fit the device's memory (`jaxstring._distribute.
+fit_group`)."""
+
+
+def _group_size(batch_size, n, local, arrays, scene, getters, fn, config, ts,
+                devices) -> int:  # fmt: skip
+    """The members' group size: `batch_size`, all `n` for None, and for "auto"
+    `CPU_GROUP` on a CPU, on a GPU all of a device's members or as many as its free
+    memory holds."""
+    if batch_size is None:
+        return n
+    if batch_size != "auto":
+        return min(batch_size, n)
+    if jax.default_backend() == "cpu":
+        return min(CPU_GROUP, n)
+    devs = jax.local_devices() if devices == "auto" else list(devices or [])[:1]
+    devs = devs or jax.local_devices()[:1]
+    per_device = math.ceil(n / len(devs))
+    if per_device <= GPU_ONE_GROUP:
+        return per_device
+    vals = tuple(jnp.asarray(a) for a in arrays)
+    args = (vals, scene, getters, fn, config, ts, per_device)  # one vmap a probe
+    return _distribute.fit_group(local, args, per_device, devs[0])
+
+
+def _workers(processes, executor, members: int) -> int:
+    """The worker processes of this host a sweep of `members` uses: `processes`,
+    or with "auto" the host's cores where the members are many enough to pay for
+    the workers' start (and the default backend is the CPU: GPUs are used by the
+    devices of this process)."""
+    if executor is not None:
+        return 0
+    if processes != "auto":
+        return int(processes)
+    if jax.default_backend() != "cpu":
+        return 1
+    cores = _distribute.host_cores()
+    return cores if members >= AUTO_MEMBERS_PER_CORE * cores else 1
+
+
 @single_blas_thread
 def sweep(
     scene: Scene,
@@ -533,10 +627,12 @@ def sweep(
     *,
     grid: bool = False,
     devices="auto",
-    batch_size: int | None = None,
+    batch_size="auto",
     order: str = "given",
     mode: str = "vmap",
     fallback: bool = True,
+    processes="auto",
+    executor=None,
     config: SolveConfig | None = None,
     **options,
 ) -> SweepResult:
@@ -563,11 +659,29 @@ def sweep(
       (`solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `newton_rtol`,
       `newton_atol`, `max_steps`, `project`, `step_control`); `ts` is shared by all
       members (default: `n_save` points over the base scene's span).
-    - `devices`: `"auto"` (all devices of the default backend), a list of devices, or
-      1 / None (no sharding). Members are padded to a multiple of the device count.
-      GPUs run their shards at the same time; XLA:CPU devices one after the other.
-    - `batch_size`: run members in groups of this size (vmap inside `lax.map`);
-      None: all members of a device in one vmap.
+    - `devices`: `"auto"` (all local devices of the default backend), a list of
+      devices, or 1 / None (no sharding). Members are padded to a multiple of the
+      device count. GPUs run their shards at the same time; XLA:CPU devices one
+      after the other (use `processes` for the cores of a CPU host).
+    - `processes`: `"auto"` (default: every core of a CPU host when there are at
+      least `AUTO_MEMBERS_PER_CORE` members per core, else this process alone; on
+      a GPU host the GPUs), or the number of worker processes: the members go in
+      chunks to jaxstring's own pool of spawned processes (kept for later sweeps),
+      which run the program this process traced once (`jaxstring._distribute`).
+    - `executor`: any `concurrent.futures.Executor` whose workers can import
+      jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to run the
+      chunks instead. A worker that dies loses no member: its chunks are run again
+      once; a chunk that fails twice gives its members the status "worker process
+      failed" (result code -1). In a `jax.distributed` job (several processes,
+      each calling `jax.distributed.initialize`) every process runs its block of
+      the members and receives every member's result.
+    - `batch_size`: run members in groups of this size (a vmap each, inside
+      `lax.map`); `"auto"` (default): `CPU_GROUP` (16) on a CPU (measured:
+      docs/performance.md, "Sweeps"), on a GPU all of a device's members, or as
+      many as its free memory holds; None: all members in one group. The members
+      are padded to whole groups, so that every member runs in a group of the
+      same size wherever it runs (this process, a device, a worker, a distributed
+      process) and gets the same result.
     - `order`: `"given"`, or `"sort"` to group members by their parameter values
       (lexicographically, in the order of `values`) -- results come back in the
       given order either way.
@@ -609,10 +723,24 @@ def sweep(
         )
     check_choice("order", order, ("given", "sort"))
     check_choice("mode", mode, ("vmap", "lockstep"))
+    if processes != "auto":
+        check_int("processes", processes, 1)
+    if executor is not None:
+        if not isinstance(executor, cf.Executor):
+            raise ValueError(
+                "`executor` must be a concurrent.futures.Executor (a "
+                "ProcessPoolExecutor, a Dask client's get_executor(), ...); got "
+                f"{type(executor).__name__}: {executor!r}."
+            )
+        if processes != "auto":
+            raise ValueError(
+                "give `processes` or `executor`, not both (an executor has its own "
+                f"workers); got processes={processes!r}."
+            )
     config = solve_config("sweep", config, **options)
     config.check_scene(scene)
     solver = config.solver
-    if batch_size is not None:
+    if batch_size not in (None, "auto"):
         check_int("batch_size", batch_size, 1)
     _check_devices(devices)
     getters = []
@@ -697,48 +825,73 @@ def sweep(
     fn = _default_fn if fn is None else fn
 
     perm = np.lexsort(arrays[::-1]) if order == "sort" else np.arange(n)
-    if devices == "auto":
-        devices = jax.devices()
-    elif devices is None or devices == 1:
-        devices = jax.devices()[:1]
-    devices = list(devices)
-    n_dev = max(1, min(len(devices), n))
-    devices = devices[:n_dev]
-    n_pad = math.ceil(n / n_dev) * n_dev
-    # Pad by repeating the last member (dropped again below).
-    idx = np.concatenate([perm, np.full(n_pad - n, perm[-1], dtype=perm.dtype)])
-    if n_dev > 1 and order == "sort":
-        # Contiguous blocks go to the devices: interleave so that each device gets
-        # members from across the range (similar total work per device).
-        idx = idx.reshape(-1, n_dev).T.ravel()
-    vals = tuple(jnp.asarray(a[idx]) for a in arrays)
+    # Members run in groups of `group` everywhere -- in this process, on each
+    # device, in each worker's chunk, in each process's block -- padded with copies
+    # of the last member, so that a member's result does not depend on where it ran.
+    local_fn = _sweep_lockstep if mode == "lockstep" else _sweep_local
+    group = _group_size(batch_size, n, local_fn, arrays, scene, getters, fn, config,
+                        ts, devices)  # fmt: skip
+    # A jax.distributed job: this process runs its block of the (ordered) members.
+    start, block = (0, n)
+    if jax.process_count() > 1:
+        start, block = _distribute.process_block(n, group)
+    mine = perm[start : start + block]
+    workers = _workers(processes, executor, len(mine))
 
     def run(local):
-        if n_dev > 1:
-            return _sweep_devices(
-                local, vals, scene, getters, fn, config, ts, batch_size, devices
+        if len(mine) == 0:
+            # An empty block of a distributed job: one member's run, to give the
+            # gathered results their structure, then no rows.
+            out, _, n_dev = run_block(local, perm[-1:])
+            return jtu.tree_map(lambda x: np.asarray(x)[:0], out), {}, n_dev
+        return run_block(local, mine)
+
+    def run_block(local, mine):
+        if executor is not None or workers > 1:
+            per = len(mine) / (4 * workers if executor is None else 8)
+            chunk = math.ceil(max(1, math.ceil(per)) / group) * group
+            args = (tuple(a[mine] for a in arrays), scene, getters, fn, config, ts)
+            out, failed = _distribute.local_run(
+                executor, workers, local, args + (group,), len(arrays), chunk
             )
-        return local(vals, scene, getters, fn, config, ts, batch_size)
+            return out, failed, 1
+        out, n_dev = _on_devices(local, arrays, mine, scene, getters, fn, config, ts,
+                                 group, devices, order)  # fmt: skip
+        return out, {}, n_dev
 
     t = time.perf_counter()
-    out, codes, stats = run(_sweep_lockstep if mode == "lockstep" else _sweep_local)
-    jax.block_until_ready((out, codes, stats))
+    result, failed, n_dev = run(local_fn)
     used = mode
-    if mode == "lockstep" and fallback and not np.all(np.asarray(codes) == 0):
-        out, codes, stats = run(_sweep_local)
-        jax.block_until_ready((out, codes, stats))
-        used = "lockstep, then vmap"
+    if mode == "lockstep" and fallback and result is not None:
+        if not np.all(np.asarray(result[1]) == 0):
+            result, failed, n_dev = run(_sweep_local)
+            used = "lockstep, then vmap"
+    if result is not None:
+        result = jtu.tree_map(np.asarray, result)
+        codes = result[1].copy()
+        for m in failed:
+            codes[m] = _distribute.WORKER_FAILED
+        result = (result[0], codes, result[2])
+    if jax.process_count() > 1:
+        result = _distribute.gather_blocks(result, n, block)
     elapsed = time.perf_counter() - t
 
-    # Position of each member in the (permuted, padded) batch: its first occurrence.
+    out, codes, stats = result
+    # Back from the members' run order (`perm`) to the given order.
     where = np.empty(n, dtype=np.int64)
-    where[idx[::-1]] = np.arange(n_pad)[::-1]
+    where[perm] = np.arange(n)
     take = lambda x: np.asarray(x)[where].reshape(shape + np.shape(x)[1:])
     out = jtu.tree_map(take, out)
     codes = take(codes)
     stats = {k: take(v) for k, v in stats.items()}
     ok = codes == 0
-    status = [code_message(c) for c in codes.ravel()]
+    reasons = {int(where[start + m]): r for m, r in failed.items()}
+    status = [
+        f"worker process failed: {reasons.get(i, 'in another process')}"
+        if c == _distribute.WORKER_FAILED
+        else code_message(c)
+        for i, c in enumerate(codes.ravel())
+    ]
     return SweepResult(
         values={g.label: a.reshape(shape) for g, a in zip(getters, arrays)},
         out=out,
@@ -750,4 +903,5 @@ def sweep(
         n_devices=n_dev,
         time=elapsed,
         mode=used,
+        processes=workers if executor is None else 0,
     )

@@ -135,3 +135,37 @@ def test_moordyn_bad_options_exit_2(tmp_path, capsys, extra, named):
     assert code == 2
     assert named in capsys.readouterr().err
     assert not list(tmp_path.glob("*.out"))
+
+
+def test_sweep_writes_a_table_per_member(tmp_path, capsys):
+    argv = ["sweep", "string-pendulum", "--k", "4", "--t1", "0.2", "--solver", "bdf",
+            "--vary", "alpha=0.005:0.05:4", "--batch-size", "2", "--processes", "1",
+            "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    lines = (tmp_path / "string-pendulum_sweep.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:4] == ["alpha", "ok", "status", "accepted_steps"]
+    assert len(lines) == 5  # one row per member, in the given order
+    alphas = [float(row.split(",")[0]) for row in lines[1:]]
+    np.testing.assert_allclose(alphas, np.linspace(0.005, 0.05, 4))
+    with np.load(tmp_path / "string-pendulum_sweep.npz") as data:
+        assert data["ok"].all()
+        # More damping, less energy left at the end (a physical check per member).
+        assert np.all(np.diff(data["energy_end_J"]) < 0)
+    assert (tmp_path / "string-pendulum_sweep.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "vary, part",
+    [
+        ("alpha=1:2", "NAME=LOW:HIGH:COUNT"),
+        ("alpha=a:2:3", "must be numbers"),
+        ("alpha=1:2:0", "COUNT must be >= 1"),
+        ("nonsense=1:2:3", "unknown parameter 'nonsense'"),
+    ],
+)
+def test_sweep_bad_vary_exits_2(tmp_path, capsys, vary, part):
+    argv = ["sweep", "string-pendulum", "--k", "4", "--t1", "0.1", "--vary", vary,
+            "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 2
+    assert part in capsys.readouterr().err

@@ -134,14 +134,14 @@ def test_sensitivity_gradient_matches_central_differences(positive):
         formulation="displacement", k=4, EA=1e3, alpha=0.02, t1=0.3
     )
     kw = dict(rtol=1e-11, atol=1e-11, n_save=11)
-    _, grad = _fit.value_and_grad(
-        scene,
-        _end_loss,
-        ["alpha", "EA"],
-        adjoint="sensitivity",
-        positive=positive,
-        **kw,
+    # What `fit` descends: d loss / d log p where positive (log-parameters), else
+    # d loss / d p.
+    config = js.SolveConfig(adjoint="sensitivity", **kw)
+    getters, theta, pos, frozen, config, ts = _fit._setup(
+        scene, _end_loss, ["alpha", "EA"], positive, True, config, count_steps=False
     )
+    _, g = _fit._jit_value_and_grad(theta, pos, frozen, _end_loss, config, True, ts)
+    grad = {getter.label: float(getter(g)) for getter in getters}
     if positive:  # d/dlog p = p d/dp
         grad = {"alpha": grad["alpha"] / 0.02, "EA": grad["EA"] / 1e3}
     config = _fit.SolveConfig(**kw)

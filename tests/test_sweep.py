@@ -119,7 +119,8 @@ def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
         assert len(jax.devices()) == 2
         base = js.string_pendulum(k=8, EA=1e6, t1=0.2)
         fn = lambda traj, s: traj.obs["positions"][:, -1, :]
-        kw = dict(solver="bdf", rtol=1e-6, atol=1e-6, n_save=5, batch_size=16)
+        kw = dict(solver="bdf", rtol=1e-6, atol=1e-6, n_save=5, batch_size=16,
+                  processes=1)
         v = {"alpha": np.linspace(0.005, 0.05, 32)}
         one = np.asarray(sweep(base, v, fn, devices=1, **kw).out)
         for _ in range(3):

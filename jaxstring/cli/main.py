@@ -1,4 +1,5 @@
-"""Command line: ``jaxstring run <scene> [options]``.
+"""Command line: ``jaxstring run <scene> [options]`` and ``jaxstring sweep <scene>
+--vary NAME=LOW:HIGH:COUNT [options]`` (`jaxstring.cli.sweep`).
 
 Each scene has a runner in `SCENES`: a function that adds the scene's options to an
 argparse subparser, and one that builds the `Scene` from the parsed options. Runs
@@ -241,9 +242,10 @@ def build_parser() -> argparse.ArgumentParser:
         )
         _animation_arguments(sp)
         _cache_arguments(sp)
-    from . import moordyn
+    from . import moordyn, sweep
 
     moordyn.add_parser(scene_parsers, _common_arguments, _cache_arguments)
+    sweep.add_parser(commands, SCENES, _common_arguments)
     return parser
 
 
@@ -444,6 +446,13 @@ def main(argv=None) -> int:
             frames = args.frames if args.animate else 0
             return run_tanker(args.scene, args.out, args.quick, args.hawser, frames)
         return _run_scene(args)
+    if args.command == "sweep":
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from . import sweep
+
+        return sweep.run(args, SCENES[args.scene])
     parser.error(f"unknown command {args.command!r}")  # pragma: no cover
     return 2  # pragma: no cover
 

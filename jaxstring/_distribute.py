@@ -1,0 +1,265 @@
+"""Where the members of a sweep run: the devices of this process, worker processes
+over this host's cores, and the processes of a `jax.distributed` job.
+
+* One XLA:CPU process runs one solver loop at a time, so the cores of a CPU host
+  are used by processes: the parent traces the chunk program once, exports it
+  (`jax.export`) and hands it with each chunk of members to the workers of a
+  `concurrent.futures` executor -- jaxstring's own spawn pool (kept for later
+  sweeps) or any executor the user passes (a Dask cluster's, say). A worker only
+  compiles and runs (`jaxstring._worker`); the compilation is shared through the
+  persistent compilation cache. A worker that dies loses no member: the chunks it
+  held are run again in a fresh pool, and a chunk that fails twice comes back
+  with the status `WORKER_FAILED`.
+* A `jax.distributed` job (N processes started by SLURM, Open MPI or by hand,
+  each calling `jax.distributed.initialize`) splits the members into one block
+  per process; each process runs its block on its own devices or workers, and
+  every process gathers every member's result (`process_allgather`).
+* GPUs of one process run their shards side by side (`jaxstring._sweep`).
+"""
+
+import atexit
+import concurrent.futures as cf
+import dataclasses
+import hashlib
+import math
+import multiprocessing
+import os
+import pickle
+
+import equinox as eqx
+import jax
+import jax.tree_util as jtu
+import numpy as np
+
+from . import _worker
+from ._jit import CPU_COMPILER_OPTIONS
+
+
+WORKER_FAILED = -1
+"""Result code of a member whose chunk failed in a worker process twice."""
+
+
+def host_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _flat(fn, args):
+    """`fn(*args)` as a function of the arrays of `args` alone (a list), and those
+    arrays: (flat function, leaves, treedef, static parts)."""
+    dynamic, static = eqx.partition(args, eqx.is_array)
+    leaves, treedef = jtu.tree_flatten(dynamic)
+
+    def flat(*xs):
+        return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
+
+    return flat, leaves, treedef, static
+
+
+def export_chunk(fn, args):
+    """`fn(*args)` traced once and exported: (key, pickled program, leaves,
+    outputs), the arrays of `args` as the program's inputs (everything else
+    compiled in) and `outputs` the output structure (shapes and dtypes)."""
+    flat, leaves, treedef, static = _flat(fn, args)
+    avals = tuple(jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves)
+    try:
+        cache_key = (fn, treedef, static, avals)
+        hash(cache_key)
+    except TypeError:  # a static part that cannot be hashed: export every time
+        cache_key = None
+    if cache_key is not None and cache_key in _EXPORTED:
+        return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
+    jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
+    exported = jax.export.export(jitted)(*avals)
+    # The private `_get_vjp` (a closure, not picklable) serves differentiation of
+    # the loaded program only, which a sweep does not do.
+    data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
+    outputs = jtu.tree_unflatten(exported.out_tree, exported.out_avals)
+    key = hashlib.sha256(data).hexdigest()[:32]
+    if cache_key is not None:
+        _EXPORTED[cache_key] = (key, data, outputs)
+    return key, data, leaves, outputs
+
+
+_EXPORTED = {}  # (fn, structure, static parts, shapes) -> exported chunk program
+
+
+_POOL = {"executor": None, "workers": 0}
+
+
+def process_pool(workers: int) -> cf.ProcessPoolExecutor:
+    """jaxstring's own pool of `workers` spawned processes (kept for later sweeps;
+    one fork of a process running JAX's threads could deadlock, hence spawn)."""
+    if _POOL["executor"] is not None and _POOL["workers"] == workers:
+        return _POOL["executor"]
+    shutdown_pool()
+    cache = jax.config.jax_compilation_cache_dir or None
+    _POOL["executor"] = cf.ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_worker.init,
+        initargs=(cache,),
+    )
+    _POOL["workers"] = workers
+    return _POOL["executor"]
+
+
+def shutdown_pool() -> None:
+    """Stop jaxstring's own worker processes (they also stop when Python exits)."""
+    if _POOL["executor"] is not None:
+        _POOL["executor"].shutdown(wait=True, cancel_futures=True)
+    _POOL["executor"], _POOL["workers"] = None, 0
+
+
+atexit.register(shutdown_pool)
+
+
+def run_chunks(executor, key, program, chunks, own_pool):
+    """Run the exported `program` on each chunk's leaves in `executor`: a list with
+    each chunk's outputs, or the text of its failure. A worker that dies breaks a
+    process pool and every chunk in flight with it, so the lost chunks are run
+    again in parallel once, and those lost again one at a time: a chunk fails only
+    when it fails on its own. jaxstring's own pool (`own_pool`) is started afresh
+    after a break; a user's executor is used as it is."""
+    results = [None] * len(chunks)
+
+    def attempt(todo):
+        nonlocal executor
+        if own_pool and _POOL["executor"] is not None and _POOL["executor"]._broken:
+            workers = _POOL["workers"]
+            shutdown_pool()
+            executor = process_pool(workers)
+        submit = lambda i: executor.submit(_worker.run, key, program, chunks[i])
+        futures = {submit(i): i for i in todo}
+        lost = []
+        for future in cf.as_completed(futures):
+            i = futures[future]
+            try:
+                results[i] = future.result()
+            except Exception as error:  # noqa: BLE001  (a dead or broken worker)
+                lost.append(i)
+                results[i] = f"{type(error).__name__}: {error}"
+        return sorted(lost)
+
+    lost = attempt(range(len(chunks)))
+    if lost:
+        lost = attempt(lost)
+    for i in lost:
+        attempt([i])
+    return results
+
+
+def local_run(executor, workers, fn, args, n_vals, chunk):
+    """The members `args[0]` (a tuple of value arrays, `(n,)` each) in chunks of
+    `chunk`, each chunk `fn(chunk values, *args[1:])`, in `executor` (None:
+    jaxstring's pool of `workers`). Returns (outputs, failed) with every leaf of the
+    outputs `(n, ...)` in member order, and `failed` a dict member index -> reason
+    for members whose chunk failed (their outputs NaN or zero)."""
+    vals = args[0]
+    n = vals[0].shape[0]
+    n_chunks = math.ceil(n / chunk)
+    pad = n_chunks * chunk - n
+    padded = [np.concatenate([v, np.repeat(v[-1:], pad)]) for v in vals]
+    parts = [
+        tuple(v[i * chunk : (i + 1) * chunk] for v in padded) for i in range(n_chunks)
+    ]
+    key, program, leaves, outputs = export_chunk(fn, (parts[0],) + tuple(args[1:]))
+    shared = [np.asarray(x) for x in leaves[n_vals:]]
+    chunks = [[np.asarray(v) for v in p] + shared for p in parts]
+    own = executor is None
+    results = run_chunks(
+        process_pool(workers) if own else executor, key, program, chunks, own
+    )
+    failed = {}
+    out = []
+    for i, r in enumerate(results):
+        if isinstance(r, str):
+            for m in range(i * chunk, min(n, (i + 1) * chunk)):
+                failed[m] = r
+            r = jtu.tree_map(_failed_like, outputs)
+        out.append(r)
+    merged = jtu.tree_map(lambda *xs: np.concatenate(xs)[:n], *out)
+    return merged, failed
+
+
+def _failed_like(aval):
+    """The outputs of a failed chunk: NaN, or the failure code for integers."""
+    if np.issubdtype(aval.dtype, np.floating):
+        return np.full(aval.shape, np.nan, aval.dtype)
+    return np.full(aval.shape, WORKER_FAILED, aval.dtype)
+
+
+# --------------------------------------------------------------------------------------
+# Group sizes from memory
+
+
+def program_bytes(fn, args, device) -> int:
+    """The memory XLA plans for `fn(*args)` on `device`: arguments, outputs and
+    temporaries (less what outputs reuse of arguments), bytes."""
+    flat, leaves, _, _ = _flat(fn, args)
+    avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    compiled = jax.jit(flat, device=device).lower(*avals).compile()
+    m = compiled.memory_analysis()
+    return int(
+        m.argument_size_in_bytes
+        + m.output_size_in_bytes
+        + m.temp_size_in_bytes
+        - m.alias_size_in_bytes
+    )
+
+
+def fit_group(fn, args, n: int, device, free_bytes=None, budget=0.8, probe=(4, 8)):
+    """The largest group of the `n` members `args[0]` (a tuple of `(n,)` value
+    arrays) whose program `fn(group values, *args[1:])` fits `budget` of the free
+    memory of `device` (`free_bytes`: the device's free memory, default from
+    `device.memory_stats()`). The memory of a group grows linearly with its size:
+    the slope and offset come from two small compiled probes. Without a memory
+    limit (a CPU) all `n`."""
+    if free_bytes is None:
+        stats = device.memory_stats() or {}
+        if not stats.get("bytes_limit"):
+            return n
+        free_bytes = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
+    vals = args[0]
+    sizes = [min(p, n) for p in probe]
+    if sizes[0] == sizes[1]:
+        return n
+    use = [
+        program_bytes(fn, (tuple(v[:m] for v in vals),) + tuple(args[1:]), device)
+        for m in sizes
+    ]
+    per = max((use[1] - use[0]) / (sizes[1] - sizes[0]), 1.0)
+    base = use[0] - sizes[0] * per
+    return int(max(1, min(n, (budget * free_bytes - base) // per)))
+
+
+# --------------------------------------------------------------------------------------
+# jax.distributed
+
+
+def process_block(n: int, group: int) -> tuple[int, int]:
+    """(start, size) of this process's block of `n` members in a jax.distributed
+    job: blocks of equal size, whole groups of `group` members (the last block may
+    be shorter, or empty)."""
+    size = math.ceil(n / (jax.process_count() * group)) * group
+    start = min(n, jax.process_index() * size)
+    return start, size
+
+
+def gather_blocks(tree, n: int, size: int):
+    """Every process's block of results (leaves `(b, ...)` with b <= `size`),
+    gathered on every process into leaves `(n, ...)` in member order."""
+    from jax.experimental import multihost_utils
+
+    def pad(x):
+        x = np.asarray(x)
+        fill = np.zeros((size - x.shape[0],) + x.shape[1:], x.dtype)
+        return np.concatenate([x, fill])
+
+    gathered = multihost_utils.process_allgather(jtu.tree_map(pad, tree))
+    return jtu.tree_map(
+        lambda x: np.asarray(x).reshape((-1,) + np.shape(x)[2:])[:n], gathered
+    )

@@ -1,0 +1,45 @@
+"""The worker side of jaxstring's process pools: run a saved program on a chunk.
+
+A worker is a process of a `concurrent.futures` executor (jaxstring's own spawn
+pool over the host's cores, or one the user passes). The parent traces a sweep's
+chunk program once and saves it (`jax.export`, pickled as `jaxstring._programs`
+stores programs); a worker loads it by path, compiles it on its CPU (or finds the
+compilation in the persistent cache), and runs it on the arrays it is sent. Only
+JAX is needed here: a worker traces nothing.
+"""
+
+import os
+import pickle
+
+
+_COMPILED = {}  # program key -> compiled call, per worker process
+
+
+def init(cache_dir: str | None) -> None:
+    """Set up a worker of jaxstring's own pool: float64, the CPU backend (a GPU
+    stays with the parent), the shared compilation cache, one OpenBLAS thread."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    jax.config.update("jax_platforms", "cpu")
+    if cache_dir:
+        jax.config.update("jax_compilation_cache_dir", cache_dir)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def run(key: str, program: bytes, leaves: list):
+    """The pickled exported `program` (named `key`) applied to `leaves` (NumPy
+    arrays); its outputs as NumPy arrays."""
+    import jax
+
+    from ._jit import CPU_COMPILER_OPTIONS
+
+    jax.config.update("jax_enable_x64", True)
+    compiled = _COMPILED.get(key)
+    if compiled is None:
+        exported = pickle.loads(program)
+        compiled = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
+        _COMPILED[key] = compiled
+    return jax.device_get(compiled(*leaves))
