@@ -197,6 +197,42 @@ def _frames_of(rods):
     return owner, trans, rot, parent, rod_frame
 
 
+def _cuthill_mckee(vertices, adj):
+    """The vertices in Cuthill-McKee order, component by component: breadth
+    first from a pseudo-peripheral vertex, neighbours by increasing degree."""
+    index = {v: i for i, v in enumerate(vertices)}
+
+    def bfs(start, seen):
+        order, levels = [start], {start: 0}
+        seen.add(start)
+        k = 0
+        while k < len(order):
+            u = order[k]
+            k += 1
+            for v in sorted(set(adj[u]) - seen, key=lambda v: (len(adj[v]),
+                            index[v])):  # fmt: skip
+                seen.add(v)
+                levels[v] = levels[u] + 1
+                order.append(v)
+        return order, levels
+
+    out, done = [], set()
+    for v0 in vertices:
+        if v0 in done:
+            continue
+        # a pseudo-peripheral start: the farthest vertex of a breadth-first
+        # search, twice
+        start = v0
+        for _ in range(2):
+            _, levels = bfs(start, set(done))
+            far = max(levels.values())
+            start = min((v for v, lv in levels.items() if lv == far),
+                        key=lambda v: (len(adj[v]), index[v]))  # fmt: skip
+        order, _ = bfs(start, done)
+        out += order
+    return out
+
+
 def _topology(points, attach, segments, rods) -> _Topology:
     free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
     held = tuple(i for i, p in enumerate(points) if not isinstance(p, FreePoint))
@@ -226,18 +262,36 @@ def _topology(points, attach, segments, rods) -> _Topology:
             return frame_object(rod_frame[e.rod])
         return ("p", e) if e in free else None
 
-    # State rows: objects placed next to the lines that reach them; a line whose
-    # end B reaches an object already placed runs from B to A, so that the band
-    # stays narrow along chains of lines, points and rods.
+    # State rows in Cuthill-McKee order of the network's graph (vertices: interior
+    # nodes, free points, rigid groups; edges: segments): breadth first from a
+    # peripheral vertex, so that the band stays narrow along chains and the
+    # branches of a hub interleave (band about the number of branches, not the
+    # length of one).
+    vertices, adj = [], {}
+
+    def vertex(v):
+        if v is not None and v not in adj:
+            adj[v] = []
+            vertices.append(v)
+        return v
+
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        chain = [vertex(obj(a))]
+        chain += [vertex(("n", k, i)) for i in range(1, N)]
+        chain.append(vertex(obj(b)))
+        for u, v in zip(chain[:-1], chain[1:]):
+            if u is not None and v is not None and u != v:
+                adj[u].append(v)
+                adj[v].append(u)
+    for i in free:
+        vertex(("p", i))
+    for g in range(len(groups)):
+        vertex(("g", g))
+    order = _cuthill_mckee(vertices, adj)
     rows_of = {}
     n = 0
-    line_rows = []
-
-    def place(o):
-        nonlocal n
-        if o is None or o in rows_of:
-            return
-        if o[0] == "p":
+    for o in order:
+        if o[0] in ("p", "n"):
             rows_of[o] = [n]
             n += 1
         else:
@@ -250,20 +304,8 @@ def _topology(points, attach, segments, rods) -> _Topology:
                     rr.append(("r", f, n))
                     n += 2
             rows_of[o] = rr
-
-    for (a, b), N in zip(attach, segments):
-        oa, ob = obj(a), obj(b)
-        reverse = ob in rows_of and oa not in rows_of and ob is not None
-        first, last = (ob, oa) if reverse else (oa, ob)
-        place(first)
-        rows = list(range(n, n + N - 1))
-        n += N - 1
-        line_rows.append(rows[::-1] if reverse else rows)
-        place(last)
-    for i in free:
-        place(("p", i))
-    for g in range(len(groups)):
-        place(("g", g))
+    line_rows = [[rows_of[("n", k, i)][0] for i in range(1, N)]
+                 for k, N in enumerate(segments)]  # fmt: skip
     n_state = n
     trans_row = [None] * len(owner)
     rot_rows = [None] * len(owner)
@@ -845,7 +887,8 @@ class LineNetwork(AbstractModel):
         return rod_loads(self.rods[r], a, q, va, F.omega, t, env, loads)
 
     def _rates(self, t, y, st: _State, effects, env):
-        """dy/dt, and the acceleration of every slot `(n_bodies, 3)`."""
+        """dy/dt, the acceleration of every slot `(n_bodies, 3)`, and the
+        translational and angular accelerations of every rigid frame."""
         top = self.topology
         n_tri, start = top.n_tri, top.rigid_start
         acc = _solve3(st.body_mass[:n_tri], st.body_force[:n_tri])
@@ -856,7 +899,7 @@ class LineNetwork(AbstractModel):
             .set(jnp.concatenate([tri[:, 3:], acc], axis=1))
         )
         if not self.rods:
-            return dy, jnp.concatenate([acc, st.held_acc], axis=0)
+            return dy, jnp.concatenate([acc, st.held_acc], axis=0), [], []
         fr = top.frames
         frames = list(st.frames)
         acc_f = [F.acceleration for F in frames]
@@ -912,7 +955,7 @@ class LineNetwork(AbstractModel):
             slot_acc.append(acc_f[f] + jnp.cross(alp_f[f], rho)
                             + jnp.cross(F.omega, jnp.cross(F.omega, rho)))  # fmt: skip
         body_acc = jnp.concatenate([acc, st.held_acc, jnp.stack(slot_acc)], axis=0)
-        return dy, body_acc
+        return dy, body_acc, acc_f, alp_f
 
     def vector_field(self, t, y, effects, env):
         st = self._state(t, y, effects, env)
@@ -941,11 +984,15 @@ class LineNetwork(AbstractModel):
         (kinetic + elastic + the potentials of the scene's constant loads, weight
         and buoyancy, J; without bending, whose nodal forces have no potential,
         and only for networks without rods). With rods: `rod_end_force` (the
-        lines' force on each rod's ends A and B, `(R, 2, 3)`, N), `rod_end_a` and
-        `rod_axis` (`(R, 3)`), `rod_nodes` (every rod node, rod by rod, m); with
-        bending stiffness: `curvature` at every line node (`(M,)`, 1/m)."""
+        lines' force on each rod's ends A and B, `(R, 2, 3)`, N), `rod_end_a`,
+        `rod_axis`, `rod_velocity`, `rod_acceleration` (of end A), `rod_omega`,
+        `rod_alpha` (`(R, 3)`), `rod_force` (`(R, 6)`: force, N, and moment about
+        end A, N m, of everything on the rod; less its inertia for a coupled rod),
+        `rod_nodes` and `rod_node_force` (every rod node, rod by rod, see
+        `rod_nodes`); with bending stiffness: `curvature` at every line node
+        (`(M,)`, 1/m)."""
         st = self._state(t, y, effects, env)
-        _, body_acc = self._rates(t, y, st, effects, env)
+        _, body_acc, acc_f, alp_f = self._rates(t, y, st, effects, env)
         fa, fb = self.end_forces(st, body_acc)
         top = self.topology
         pf = jnp.zeros((len(self.points), 3))
@@ -998,18 +1045,76 @@ class LineNetwork(AbstractModel):
                            - jnp.sum(_dot(f.points, kin.point_positions)))  # fmt: skip
             out["energy"] = ke + elastic + pot
         if self.rods:
+            out.update(self._rod_observables(t, st, body_acc, acc_f, alp_f,
+                                             effects, env))  # fmt: skip
             out["rod_end_force"] = rf.reshape(len(self.rods), 2, 3)
-            out["rod_end_a"] = jnp.stack([g[0] for g in st.rods])
-            out["rod_axis"] = jnp.stack([g[1] for g in st.rods])
-            out["rod_nodes"] = jnp.concatenate(
-                [
-                    g[0] + jnp.linspace(0, 1, r.segments + 1)[:, None] * (g[2] * g[1])
-                    for r, g in zip(self.rods, st.rods)
-                ]
-            )
         if st.curvature is not None:
             out["curvature"] = st.curvature
         return out
+
+    def _rod_observables(self, t, st, body_acc, acc_f, alp_f, effects, env):
+        """Per rod: end A's position, velocity and acceleration, the axis, the
+        angular velocity and acceleration, every node, and the net force and
+        moment about end A of everything on it (its loads and the end nodes of
+        its lines: MoorDyn's F6net), less its inertia for a coupled rod (the
+        force its motion takes: MoorDyn's getFnet)."""
+        top = self.topology
+        ends = [[] for _ in range(2 * len(self.rods))]
+        for k, (a, b) in enumerate(self.attach):
+            for e, node in ((a, top.end_a[k]), (b, top.end_b[k])):
+                if isinstance(e, RodEnd):
+                    ends[2 * e.rod + (e.end == "B")].append(int(node))
+        out = {k: [] for k in ("rod_end_a", "rod_axis", "rod_velocity", "rod_omega",
+                               "rod_acceleration", "rod_alpha", "rod_force",
+                               "rod_nodes", "rod_node_force")}  # fmt: skip
+        for r, rod in enumerate(self.rods):
+            a, q, L, f = st.rods[r]
+            F = st.frames[f]
+            ld = self._rod_loads(st, r, t, effects, env)
+            pos, force, mass = ld.positions, ld.forces, ld.masses
+            # the lines' end nodes at its ends
+            for side, idx in ((0, ends[2 * r]), (-1, ends[2 * r + 1])):
+                if idx:
+                    nodes = np.asarray(idx)
+                    force = force.at[side].add(jnp.sum(st.node_force[nodes], 0))
+                    mass = mass.at[side].add(jnp.sum(st.node_mass[nodes], 0))
+            rho = pos - a
+            F6 = jnp.concatenate(
+                [jnp.sum(force, 0), jnp.sum(jnp.cross(rho, force), 0) + ld.moment]
+            )
+            w = F.omega
+            rho_f = pos - F.position
+            acc = (acc_f[f] + jnp.cross(alp_f[f], rho_f)
+                   + jnp.cross(w, jnp.cross(w, rho_f)))  # fmt: skip
+            if rod.kind in ("coupled", "coupled_pinned"):
+                inert = jnp.einsum("kij,kj->ki", mass, acc)
+                Fi = jnp.sum(inert, 0)
+                Mi = (jnp.sum(jnp.cross(rho, inert), 0) + ld.inertia @ alp_f[f]
+                      + jnp.cross(w, ld.inertia @ w))  # fmt: skip
+                if rod.kind == "coupled":
+                    F6 = F6 - jnp.concatenate([Fi, Mi])
+                else:
+                    F6 = jnp.concatenate([F6[:3] - Fi, jnp.zeros(3)])
+            out["rod_end_a"].append(a)
+            out["rod_axis"].append(q)
+            out["rod_velocity"].append(F.velocity + jnp.cross(w, a - F.position))
+            out["rod_acceleration"].append(acc[0])
+            out["rod_omega"].append(w)
+            out["rod_alpha"].append(alp_f[f])
+            out["rod_force"].append(F6)
+            out["rod_nodes"].append(pos)
+            out["rod_node_force"].append(force)
+        stack = {k: jnp.stack(v) for k, v in out.items()
+                 if k not in ("rod_nodes", "rod_node_force")}  # fmt: skip
+        stack["rod_nodes"] = jnp.concatenate(out["rod_nodes"])
+        stack["rod_node_force"] = jnp.concatenate(out["rod_node_force"])
+        del body_acc
+        return stack
+
+    def rod_nodes(self, r: int) -> np.ndarray:
+        """Indices of rod `r`'s nodes (A to B) in the `rod_nodes` observable."""
+        start = sum(rod.segments + 1 for rod in self.rods[:r])
+        return np.arange(start, start + self.rods[r].segments + 1)
 
     def line_nodes(self, k: int) -> np.ndarray:
         """Indices of line `k`'s nodes (A to B) in the `nodes` observable."""
