@@ -988,8 +988,10 @@ class LineNetwork(AbstractModel):
         `rod_axis`, `rod_velocity`, `rod_acceleration` (of end A), `rod_omega`,
         `rod_alpha` (`(R, 3)`), `rod_force` (`(R, 6)`: force, N, and moment about
         end A, N m, of everything on the rod; less its inertia for a coupled rod),
-        `rod_nodes` and `rod_node_force` (every rod node, rod by rod, see
-        `rod_nodes`); with bending stiffness: `curvature` at every line node
+        `rod_end_tension` (`(R, 2)`, N: the magnitude of the lines' end-node
+        forces on ends A and B, MoorDyn's TENA, TENB), `rod_nodes` and
+        `rod_node_force` (every rod node, rod by rod, see `rod_nodes`); with
+        bending stiffness: `curvature` at every line node
         (`(M,)`, 1/m)."""
         st = self._state(t, y, effects, env)
         _, body_acc, acc_f, alp_f = self._rates(t, y, st, effects, env)
@@ -1066,7 +1068,8 @@ class LineNetwork(AbstractModel):
                     ends[2 * e.rod + (e.end == "B")].append(int(node))
         out = {k: [] for k in ("rod_end_a", "rod_axis", "rod_velocity", "rod_omega",
                                "rod_acceleration", "rod_alpha", "rod_force",
-                               "rod_nodes", "rod_node_force")}  # fmt: skip
+                               "rod_nodes", "rod_node_force",
+                               "rod_end_tension")}  # fmt: skip
         for r, rod in enumerate(self.rods):
             a, q, L, f = st.rods[r]
             F = st.frames[f]
@@ -1104,6 +1107,10 @@ class LineNetwork(AbstractModel):
             out["rod_force"].append(F6)
             out["rod_nodes"].append(pos)
             out["rod_node_force"].append(force)
+            out["rod_end_tension"].append(jnp.stack([
+                safe_norm(jnp.sum(st.node_force[np.asarray(ix, int)], 0))
+                if ix else jnp.zeros(()) for ix in (ends[2 * r], ends[2 * r + 1])
+            ]))  # fmt: skip
         stack = {k: jnp.stack(v) for k, v in out.items()
                  if k not in ("rod_nodes", "rod_node_force")}  # fmt: skip
         stack["rod_nodes"] = jnp.concatenate(out["rod_nodes"])

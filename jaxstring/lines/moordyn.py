@@ -1031,22 +1031,80 @@ def static_tensions(scene: Scene) -> dict:
 
 
 def output_channels(traj, scene: Scene) -> dict:
-    """MoorDyn-style channels of a trajectory: `Time`; per line `FAIRTEN<id>`
-    (end B) and `ANCHTEN<id>` (end A) tension magnitudes, N; per line node
-    `L<id>N<i>P{X,Y,Z}` positions, m. Returns an ordered dict name -> `(T,)`."""
+    """MoorDyn-style channels of a trajectory (MoorDyn's names and units):
+
+    - `Time`, s;
+    - per line: `FAIRTEN<id>` (end B) and `ANCHTEN<id>` (end A) tension
+      magnitudes, N; per line node `L<id>N<i>P{X,Y,Z}` positions, m;
+    - per rod (IDs 1, 2, ... in deck order): `ROD<id>P{X,Y,Z}` (end A, m),
+      `ROD<id>R{X,Y}` (the axis' inclination phi from +z and heading beta as
+      -phi sin(beta), phi cos(beta), deg), `ROD<id>V{X,Y,Z}` (m/s),
+      `ROD<id>RV{X,Y,Z}` (deg/s), `ROD<id>A{X,Y,Z}` (m/s^2),
+      `ROD<id>RA{X,Y,Z}` (deg/s^2), `ROD<id>F{X,Y,Z}` (N) and `ROD<id>M{X,Y,Z}`
+      (N m, about end A: everything on the rod, less its inertia for a coupled
+      rod), `ROD<id>TENA`, `ROD<id>TENB` (the lines' end forces on each end, N),
+      `ROD<id>N<i>P{X,Y,Z}` (nodes, m).
+
+    Returns an ordered dict name -> `(T,)`."""
     model = scene.model
     ids = model.line_ids or tuple(range(1, model.n_lines + 1))
+    obs = traj.obs
     ch = {"Time": np.asarray(traj.ts)}
-    ta, tb = np.asarray(traj.obs["tension_a"]), np.asarray(traj.obs["tension_b"])
+    ta, tb = np.asarray(obs["tension_a"]), np.asarray(obs["tension_b"])
     for k, lid in enumerate(ids):
         ch[f"FAIRTEN{lid}"] = tb[:, k]
         ch[f"ANCHTEN{lid}"] = ta[:, k]
-    nodes = np.asarray(traj.obs["nodes"])
+    nodes = np.asarray(obs["nodes"])
     for k, lid in enumerate(ids):
         for i, m in enumerate(model.line_nodes(k)):
             for c, axis in enumerate("XYZ"):
                 ch[f"L{lid}N{i}P{axis}"] = nodes[:, m, c]
+    if model.rods:
+        get = lambda key: np.asarray(obs[key])
+        q = get("rod_axis")
+        phi = np.arctan2(np.hypot(q[..., 0], q[..., 1]), q[..., 2])
+        level = np.hypot(q[..., 0], q[..., 1]) < 1e-6
+        beta = np.where(level, 0.0, np.arctan2(q[..., 1], q[..., 0]))
+        deg = 180.0 / np.pi
+        rx, ry = -phi * np.sin(beta) * deg, phi * np.cos(beta) * deg
+        force, ten = get("rod_force"), get("rod_end_tension")
+        rnodes = get("rod_nodes")
+        for r in range(len(model.rods)):
+            p = f"ROD{r + 1}"
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}P{axis}"] = get("rod_end_a")[:, r, c]
+            ch[f"{p}RX"], ch[f"{p}RY"] = rx[:, r], ry[:, r]
+            for key, name, scale in (("rod_velocity", "V", 1.0),
+                                     ("rod_omega", "RV", deg),
+                                     ("rod_acceleration", "A", 1.0),
+                                     ("rod_alpha", "RA", deg)):  # fmt: skip
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, r, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}F{axis}"] = force[:, r, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}M{axis}"] = force[:, r, 3 + c]
+            ch[f"{p}TENA"], ch[f"{p}TENB"] = ten[:, r, 0], ten[:, r, 1]
+            for i, m in enumerate(model.rod_nodes(r)):
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}N{i}P{axis}"] = rnodes[:, m, c]
     return ch
+
+
+def channel_unit(name: str) -> str:
+    """MoorDyn's unit of an output channel name, e.g. `"(m)"` for `L1N3PX`."""
+    if name == "Time":
+        return "(s)"
+    if "TEN" in name:
+        return "(N)"
+    tail = re.sub(r"^(L|LINE|P|POINT|R|ROD|B|BODY)\d+(N(\d+|A|B))?", "", name)
+    return {"PX": "(m)", "PY": "(m)", "PZ": "(m)", "RX": "(deg)", "RY": "(deg)",
+            "RZ": "(deg)", "VX": "(m/s)", "VY": "(m/s)", "VZ": "(m/s)",
+            "RVX": "(deg/s)", "RVY": "(deg/s)", "RVZ": "(deg/s)", "AX": "(m/s^2)",
+            "AY": "(m/s^2)", "AZ": "(m/s^2)", "RAX": "(deg/s^2)",
+            "RAY": "(deg/s^2)", "RAZ": "(deg/s^2)", "FX": "(N)", "FY": "(N)",
+            "FZ": "(N)", "MX": "(Nm)", "MY": "(Nm)", "MZ": "(Nm)",
+            "T": "(N)"}.get(tail, "(-)")  # fmt: skip
 
 
 def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
@@ -1055,8 +1113,7 @@ def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
     `<stem>.npz`. Returns both paths."""
     ch = output_channels(traj, scene)
     names = list(ch)
-    units = ["(s)"] + ["(N)" if n.endswith(("TEN", "TEN1")) or "TEN" in n else "(m)"
-                       for n in names[1:]]  # fmt: skip
+    units = [channel_unit(n) for n in names]
     data = np.stack([ch[n] for n in names], axis=1)
     out = f"{stem}.out"
     with open(out, "w") as f:

@@ -183,3 +183,28 @@ def test_coupled_rod_follows_its_motion():
         np.testing.assert_allclose(obs["rod_nodes"][-1], b, atol=1e-12)
     with pytest.raises(ValueError, match="`motion` is for a 'coupled'"):
         lines.Rod([0.0, 0, -5], [0.0, 2, -5], 2, 0.2, 10.0, motion=motion)
+
+
+def test_rod_output_channels(tmp_path):
+    """MoorDyn's rod channels: at rest the pinned rod lying along +x carries its
+    buoyancy less its weight, (rho A L - w L) g up, and the moment of that
+    force about end A, half a metre away; its axis is 90 deg from vertical.
+    Half a second on it has swung over to -x, as MoorDyn's."""
+    scene = lines.read_moordyn(lines.case_path("RodPinnedFloating.txt"), t1=0.5)
+    traj = js.simulate(scene, "tsit5", rtol=1e-6, atol=1e-6,
+                       ts=np.linspace(0.0, 0.5, 3))  # fmt: skip
+    out, npz = lines.write_outputs(traj, scene, str(tmp_path / "rpf"))
+    with open(out) as f:
+        names, units = f.readline().split(), f.readline().split()
+    assert names[:4] == ["Time", "ROD1PX", "ROD1PY", "ROD1PZ"]
+    assert units[names.index("ROD1RY")] == "(deg)"
+    assert units[names.index("ROD2MX")] == "(Nm)"
+    ch = np.load(npz)
+    Fz = (1000.0 * math.pi * 0.25**2 / 4 - 10.0) * G
+    assert ch["ROD1FZ"][0] == pytest.approx(Fz, rel=1e-12)
+    assert ch["ROD1MY"][0] == pytest.approx(-0.5 * Fz, rel=1e-12)
+    assert ch["ROD2MX"][0] == pytest.approx(0.5 * Fz, rel=1e-12)
+    assert ch["ROD1RY"][0] == pytest.approx(90.0) and ch["ROD2RX"][0] == -90.0
+    # swung up and over in 0.5 s (MoorDyn's moment then: 191.658 N m)
+    assert ch["ROD1N1PZ"][1] > -4.2 and ch["ROD1N1PX"][-1] < -0.99
+    assert ch["ROD1MY"][-1] == pytest.approx(191.658, rel=1e-4)
