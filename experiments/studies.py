@@ -67,6 +67,11 @@ TETHER = (*SOLVE, "jaxstring/tether", "jaxstring/chain")
 TANDEM = (*SOLVE, "jaxstring/tandem", "jaxstring/chain")
 FIT = ("jaxstring/_fit.py", "jaxstring/_least_squares.py", "jaxstring/_sensitivity.py")
 LINES = (*SOLVE, "jaxstring/lines", "jaxstring/chain")
+STATICS = (
+    "jaxstring/lines/statics.py",
+    "jaxstring/lines/catenary.py",
+    "jaxstring/lines/bodies.py",
+)
 
 _RACE_PARTS = ("displacement_1e6", "displacement_1e9", "angle_1e6", "angle_1e9")
 _SCALING = (
@@ -429,6 +434,24 @@ STUDIES = (
             Run(("--gradients",), _files("moordyn_cases_gradients")),
             Run(("--identify",), _files("moordyn_cases_identify")),
         ),
+    ),
+    Study(
+        "statics_moorpy",
+        "statics_moorpy.py",
+        "catenary statics (equilibrium, coupled stiffness, gradients) of the OC3 "
+        "mooring against MoorPy: agreement and cost",
+        "1 min / 3 min",
+        (*STATICS, "jaxstring/testing/moorpy_peer.py"),
+        (Run((), _files("statics_moorpy", "statics_moorpy_gradient")),),
+    ),
+    Study(
+        "mooring_design",
+        "mooring_design.py",
+        "line length and anchor radius of the OC3 spar's mooring for a surge "
+        "stiffness and a tension limit, by Newton on the exact statics",
+        "2 min / 3 min",
+        STATICS,
+        (Run((), _files("mooring_design", ext=("md", "csv", "png"))),),
     ),
     Study(
         "tanker_equilibria",

@@ -6,12 +6,11 @@ is written out here instead of going through diffrax's generic Runge-Kutta loop,
 whose one scanned body serves every stage with masked coefficient rows, writes each
 stage into a carried stage array and runs a root find that carries the
 factorisation in its state. Here the stages are unrolled at trace time (the
-coefficients are constants, zero terms vanish), each stage's simplified Newton
-iteration is one small while loop over (f, size, status), and one factorisation of
-``I - h gamma J(t0, y0)`` serves every stage of a step (all the diagonal entries are
-gamma). An attempted step runs about as many XLA kernels as diffrax's, but cheaper
-ones; the unrolled program takes longer to compile (measured against diffrax's
-Kvaerno: docs/numerics.md, "Kvaerno written out").
+stages run in one loop over a padded tableau (one traced stage), each stage's
+simplified Newton iteration is one small while loop over (f, size, status), and one
+factorisation of ``I - h gamma J(t0, y0)`` serves every stage of a step (all the
+diagonal entries are gamma) and is not carried through a root find (measured
+against diffrax's Kvaerno: docs/numerics.md, "Kvaerno written out").
 
 Stage i solves, for its derivative f_i (f-space, as diffrax),
 
@@ -55,7 +54,7 @@ import numpy as np
 
 from .. import _linalg
 from .fixed_step import OneStepODESolver, _rms
-from .rosenbrock import _VF, _combine
+from .rosenbrock import _VF
 
 
 class _Tableau(eqx.Module):
@@ -138,20 +137,31 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         if made_jump is not False:
             f0 = lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0)
         fac = factor(t0, y0)
-        fs = [f0]
-        ok = jnp.array(True)
-        for i in range(1, len(tab.c)):
-            ti = t0 + tab.c[i] * h
-            z = y0 + h * _combine(tab.a[i - 1], fs)
-            f_pred = _combine(tab.a_pred[i - 1], fs)
+        # The stages in one loop (one traced stage, so one Newton iteration and one
+        # refresh in the program, not one per stage); row i of the padded tableau
+        # combines the stage derivatives f_0 .. f_(i-1).
+        s = len(tab.c)
+        A, P = np.zeros((s, s)), np.zeros((s, s))
+        for i in range(1, s):
+            A[i, :i], P[i, :i] = tab.a[i - 1], tab.a_pred[i - 1]
+        A, P, C = (jnp.asarray(x, dtype) for x in (A, P, np.asarray(tab.c)))
+        combine = lambda row, fs: jnp.tensordot(row, fs, axes=1)
+
+        def stage(i, carry):
+            fs, ok = carry
+            z = y0 + h * combine(A[i], fs)
             f_i, conv = self._stage(
-                terms, args, ti, z, hg, f_pred, fac, factor, width, second_order
-            )
-            ok = ok & conv
-            fs.append(f_i)
+                terms, args, t0 + C[i] * h, z, hg, combine(P[i], fs), fac, factor,
+                width, second_order,
+            )  # fmt: skip
+            return fs.at[i].set(f_i), ok & conv
+
+        fs = jnp.zeros((s,) + y0.shape, dtype).at[0].set(f0)
+        fs, ok = lax.fori_loop(1, s, stage, (fs, jnp.array(True)))
+        z = y0 + h * combine(A[s - 1], fs)
         # Stiffly accurate: y1 is the last stage's value, f(t1, y1) its derivative.
         y1 = z + hg * fs[-1]
-        y_error = h * _combine(tab.b_error, fs)
+        y_error = h * combine(jnp.asarray(tab.b_error, dtype), fs)
         ok = ok & jnp.all(jnp.isfinite(y1)) & jnp.all(jnp.isfinite(y_error))
         y_error = jnp.where(ok, y_error, jnp.inf)
         y1 = jnp.where(ok, y1, y0)

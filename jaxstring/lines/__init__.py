@@ -16,6 +16,17 @@ from ..chain import (
     Gravity as Gravity,
     MotionEnd as MotionEnd,
 )
+from .bodies import (
+    BODY_KINDS as BODY_KINDS,
+    Body as Body,
+    euler_angles as euler_angles,
+    matrix_to_quat as matrix_to_quat,
+    quat_multiply as quat_multiply,
+    quat_to_matrix as quat_to_matrix,
+    rotation_from_vector as rotation_from_vector,
+    rotation_matrix as rotation_matrix,
+    skew as skew,
+)
 from .effects import Seabed as Seabed
 from .models import (
     FreePoint as FreePoint,
@@ -37,6 +48,15 @@ from .moordyn import (
 )
 from .rigid import RigidMotion as RigidMotion
 from .rods import Rod as Rod, RodEnd as RodEnd
+from .statics import (
+    MooringEquilibrium as MooringEquilibrium,
+    MooringLoads as MooringLoads,
+    MooringPoint as MooringPoint,
+    MooringSystem as MooringSystem,
+    coupled_stiffness as coupled_stiffness,
+    mooring_equilibrium as mooring_equilibrium,
+    mooring_system as mooring_system,
+)
 
 
 __all__ = [
@@ -62,4 +82,20 @@ __all__ = [
     "read_moordyn",
     "static_tensions",
     "write_outputs",
+    "BODY_KINDS",
+    "Body",
+    "euler_angles",
+    "matrix_to_quat",
+    "quat_multiply",
+    "quat_to_matrix",
+    "rotation_from_vector",
+    "rotation_matrix",
+    "skew",
+    "MooringEquilibrium",
+    "MooringLoads",
+    "MooringPoint",
+    "MooringSystem",
+    "coupled_stiffness",
+    "mooring_equilibrium",
+    "mooring_system",
 ]
