@@ -29,6 +29,7 @@ from .bodies import (
 )
 from .effects import Seabed as Seabed
 from .models import (
+    BodyPoint as BodyPoint,
     FreePoint as FreePoint,
     LineNetwork as LineNetwork,
     equilibrium as equilibrium,
@@ -65,6 +66,7 @@ __all__ = [
     "Gravity",
     "MotionEnd",
     "Seabed",
+    "BodyPoint",
     "FreePoint",
     "LineNetwork",
     "RigidMotion",

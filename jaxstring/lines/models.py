@@ -62,14 +62,14 @@ from ..chain import (
     unit,
 )
 from .bending import bending_forces
+from .bodies import Body, matrix_to_quat, quat_to_matrix, rotation_matrix
 from .effects import Seabed
 from .rigid import (
     Frame,
     PointSet,
+    RigidMotion,
     Rotational,
     group_accelerations,
-    matrix_quat,
-    quat_matrix,
     quat_rate,
 )
 from .rods import Rod, RodEnd, rod_loads
@@ -102,6 +102,37 @@ class FreePoint(eqx.Module):
         check_nonnegative("Ca", self.Ca)
 
 
+class BodyPoint(eqx.Module):
+    """A point fixed on a body (MoorDyn's `Body<n>` point): it moves with the
+    body, and its own loads and the lines on it load the body.
+
+    **Arguments:** `body` (index in `LineNetwork.bodies`, structure), `position`
+    (in the body's frame, relative to its reference point, `(3,)`, m), `mass`
+    (kg), `volume` (m^3), `CdA` (m^2), `Ca` (added mass on rho V), all >= 0.
+    """
+
+    body: int = eqx.field(static=True)
+    position: Float[Array, "3"] = _param()
+    mass: Float[Array, ""] = _param(default=0.0)
+    volume: Float[Array, ""] = _param(default=0.0)
+    CdA: Float[Array, ""] = _param(default=0.0)
+    Ca: Float[Array, ""] = _param(default=0.0)
+
+    def __check_init__(self):
+        if (
+            isinstance(self.body, bool)
+            or not isinstance(self.body, int)
+            or (self.body < 0)
+        ):
+            raise ValueError(f"`body` must be an integer >= 0; got {self.body!r}.")
+        check_shape("position", self.position, (3,), "m")
+        check_finite("position", self.position)
+        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
+            check_shape(name, getattr(self, name), (), u)
+            check_nonnegative(name, getattr(self, name), u)
+        check_nonnegative("Ca", self.Ca)
+
+
 _LINE_PARAMS = ("L", "d", "w", "EA", "BA", "Cd", "Ca", "CdAx", "CaAx")
 
 
@@ -123,10 +154,10 @@ class _Bending(eqx.Module):
 
 class _Frames(eqx.Module):
     """Static description of the rigid frames: frame 0 is the earth, then one per
-    rod that is not fixed (a fixed rod moves with the earth's or its body's
-    frame)."""
+    body, then one per rod that is not fixed (a fixed rod moves with the earth's
+    or its body's frame)."""
 
-    owner: tuple  # per frame: ("earth", None) | ("rod", r)
+    owner: tuple  # per frame: ("earth", None) | ("body", b) | ("rod", r)
     trans: tuple  # per frame: "fixed" | "state" | "pin" | "motion"
     rot: tuple  # per frame: "fixed" | "state" | "motion"
     parent: tuple  # per frame: the frame its origin is pinned to, or None
@@ -145,7 +176,7 @@ class _Topology(eqx.Module):
 
     Every line node sits on a "body" (a slot): a three-degree-of-freedom state
     row (interior nodes and free points, in `tri_rows` order), a held point, or a
-    point of a rigid frame (rod ends), in that order."""
+    point of a rigid frame (rod ends, points on bodies), in that order."""
 
     n_state: int
     tri_rows: np.ndarray  # slot j < n_tri -> its state row
@@ -160,6 +191,7 @@ class _Topology(eqx.Module):
     free_rows: np.ndarray  # free point (in `free` order) -> slot
     free: tuple  # indices of the free points in `points`
     held: tuple  # indices of the held points in `points`
+    on_body: tuple  # indices of the points on bodies in `points`
     point_body: np.ndarray  # point -> slot
     rod_body: np.ndarray  # (rod, end A/B) -> slot, (R, 2)
     slot_frame: np.ndarray  # rigid slot (from n_tri + H) -> frame
@@ -180,20 +212,28 @@ class _Topology(eqx.Module):
         return self.n_tri + len(self.held)
 
 
-def _frames_of(rods):
-    """Frames (without rows) of the rods: see `_Frames`."""
+def _frames_of(rods, bodies):
+    """Frames (without rows) of the bodies and rods: see `_Frames`."""
     owner, trans, rot, parent = [("earth", None)], ["fixed"], ["fixed"], [None]
+    for b, body in enumerate(bodies):
+        owner.append(("body", b))
+        trans.append({"fixed": "fixed", "free": "state", "coupled": "motion",
+                      "pinned": "motion"}[body.kind])  # fmt: skip
+        rot.append({"fixed": "fixed", "free": "state", "coupled": "motion",
+                    "pinned": "state"}[body.kind])  # fmt: skip
+        parent.append(None)
     rod_frame = []
     for r, rod in enumerate(rods):
+        home = 0 if rod.body is None else 1 + rod.body
         if rod.kind == "fixed":
-            rod_frame.append(0)
+            rod_frame.append(home)
             continue
         rod_frame.append(len(owner))
         owner.append(("rod", r))
         trans.append({"pinned": "pin", "free": "state", "coupled": "motion",
                       "coupled_pinned": "motion"}[rod.kind])  # fmt: skip
         rot.append("motion" if rod.kind == "coupled" else "state")
-        parent.append(0 if rod.kind == "pinned" else None)
+        parent.append(home if rod.kind == "pinned" else None)
     return owner, trans, rot, parent, rod_frame
 
 
@@ -233,10 +273,11 @@ def _cuthill_mckee(vertices, adj):
     return out
 
 
-def _topology(points, attach, segments, rods) -> _Topology:
+def _topology(points, attach, segments, rods, bodies) -> _Topology:
     free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
-    held = tuple(i for i, p in enumerate(points) if not isinstance(p, FreePoint))
-    owner, trans, rot, parent, rod_frame = _frames_of(rods)
+    held = tuple(i for i, p in enumerate(points) if isinstance(p, AbstractEnd))
+    on_body = tuple(i for i, p in enumerate(points) if isinstance(p, BodyPoint))
+    owner, trans, rot, parent, rod_frame = _frames_of(rods, bodies)
     has_dof = [t == "state" or r == "state" for t, r in zip(trans, rot)]
     # groups: a frame with degrees of freedom and those pinned to it
     group_of, groups = {}, []
@@ -254,12 +295,15 @@ def _topology(points, attach, segments, rods) -> _Topology:
     def frame_object(f):
         return ("g", group_of[f]) if f in group_of else None
 
-    # rigid slots: both ends of every rod
+    # rigid slots: both ends of every rod, then the points on bodies
     slot_frame = [rod_frame[r] for r in range(len(rods)) for _ in range(2)]
+    slot_frame += [1 + points[i].body for i in on_body]
 
     def obj(e):
         if isinstance(e, RodEnd):
             return frame_object(rod_frame[e.rod])
+        if e in on_body:
+            return frame_object(1 + points[e].body)
         return ("p", e) if e in free else None
 
     # State rows in Cuthill-McKee order of the network's graph (vertices: interior
@@ -340,6 +384,8 @@ def _topology(points, attach, segments, rods) -> _Topology:
     for j, i in enumerate(held):
         point_body[i] = n_tri + j
     rod_body = n_tri + len(held) + np.arange(2 * len(rods)).reshape(len(rods), 2)
+    for j, i in enumerate(on_body):
+        point_body[i] = n_tri + len(held) + 2 * len(rods) + j
 
     def slot(e):
         if isinstance(e, RodEnd):
@@ -413,6 +459,7 @@ def _topology(points, attach, segments, rods) -> _Topology:
         free_rows=arr([point_body[i] for i in free]),
         free=free,
         held=held,
+        on_body=on_body,
         point_body=arr(point_body),
         rod_body=arr(rod_body).reshape(len(rods), 2),
         slot_frame=arr(slot_frame),
@@ -451,6 +498,7 @@ class _State(eqx.Module):
     curvature: Array | None  # (M,) bending curvature at the nodes, 1/m
     frames: list  # rigid.Frame of every rigid frame
     rods: list  # per rod: (end A, axis, length, frame)
+    rigid_pos: Array  # (K, 3) positions of the rigid slots
 
 
 class LineNetwork(AbstractModel):
@@ -476,6 +524,13 @@ class LineNetwork(AbstractModel):
       to the rod's axis, a line end on a point is a hinge.
     - `rods`: tuple of `Rod`s (default none); a line end names a rod end as
       `RodEnd(rod index, "A" | "B")` in `attach`.
+    - `bodies`: tuple of `Body`s (`jaxstring.lines.bodies`; default none):
+      rigid bodies with 6 degrees of freedom ("free"), held ("fixed"), moved by
+      a prescribed motion ("coupled") or with a prescribed reference point and
+      free rotation ("pinned", MoorDyn's CoupledPinned). Points on a body are
+      `BodyPoint`s in `points`; rods on a body name it in `Rod.body`.
+    - `body_motions`: per body, None or the `RigidMotion` of a coupled or pinned
+      body (default: all None, held at their initial pose).
     """
 
     points: tuple
@@ -495,34 +550,62 @@ class LineNetwork(AbstractModel):
     point_ids: tuple | None = eqx.field(static=True, default=None)
     EI: Float[Array, " n"] | None = eqx.field(converter=_none_or_f64, default=None)
     rods: tuple = ()
+    bodies: tuple = ()
+    body_motions: tuple = ()
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (Gravity, Buoyancy, AbstractChainLoad)
 
     def __check_init__(self):
         if not isinstance(self.points, tuple):
             raise ValueError(f"`points` must be a tuple; got {self.points!r}.")
+        if not isinstance(self.bodies, tuple) or not all(
+            isinstance(b, Body) for b in self.bodies
+        ):
+            raise ValueError(
+                f"`bodies` must be a tuple of Bodies; got {self.bodies!r}."
+            )
+        nb = len(self.bodies)
         for i, p in enumerate(self.points):
-            if not isinstance(p, (AbstractEnd, FreePoint)):
+            if not isinstance(p, (AbstractEnd, FreePoint, BodyPoint)):
                 raise ValueError(
-                    f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd or "
-                    f"FreePoint; got {p!r}."
+                    f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd, "
+                    f"FreePoint or BodyPoint; got {p!r}."
+                )
+            if isinstance(p, BodyPoint) and not p.body < nb:
+                raise ValueError(
+                    f"`points[{i}].body` must be a body index in 0..{nb - 1}; got "
+                    f"{p.body}."
                 )
         if not isinstance(self.rods, tuple) or not all(
             isinstance(r, Rod) for r in self.rods
         ):
             raise ValueError(f"`rods` must be a tuple of Rods; got {self.rods!r}.")
+        if self.body_motions and len(self.body_motions) != nb:
+            raise ValueError(
+                f"`body_motions` must hold one entry per body ({nb}); got "
+                f"{len(self.body_motions)}."
+            )
+        for b, m in enumerate(self.body_motions):
+            if m is not None and (
+                not isinstance(m, RigidMotion)
+                or self.bodies[b].kind not in ("coupled", "pinned")
+            ):
+                raise ValueError(
+                    f"`body_motions[{b}]` must be None or a RigidMotion of a coupled "
+                    f"or pinned body; got {m!r} for a {self.bodies[b].kind!r} body."
+                )
         n = len(self.attach)
-        if n == 0 and not self.rods:
+        if n == 0 and not (self.rods or self.bodies):
             raise ValueError("`attach` must name at least one line (a, b).")
         if len(self.segments) != n:
             raise ValueError(
                 f"`segments` must have one entry per line ({n}); got {self.segments!r}."
             )
         for j, r in enumerate(self.rods):
-            if r.body is not None:
+            if r.body is not None and not r.body < nb:
                 raise ValueError(
-                    f"`rods[{j}]`: a rod on a body is not simulated; valid: rods on "
-                    "the earth (body None)."
+                    f"`rods[{j}].body` must be a body index in 0..{nb - 1}; got "
+                    f"{r.body}."
                 )
             if r.segments == 0:
                 raise ValueError(
@@ -578,7 +661,8 @@ class LineNetwork(AbstractModel):
 
     @property
     def topology(self) -> _Topology:
-        return _topology(self.points, self.attach, self.segments, self.rods)
+        return _topology(self.points, self.attach, self.segments, self.rods,
+                         self.bodies)  # fmt: skip
 
     def state_shape(self):
         return (self.topology.n_state, 6)
@@ -659,11 +743,15 @@ class LineNetwork(AbstractModel):
         return tuple(out)
 
     def _free_params(self):
-        free = [self.points[i] for i in self.topology.free]
-        if not free:
+        return self._point_params(self.topology.free)
+
+    def _point_params(self, which):
+        """Mass, volume, CdA and Ca of the points `which` (indices), `(P,)` each."""
+        pts = [self.points[i] for i in which]
+        if not pts:
             z = jnp.zeros((0,))
             return z, z, z, z
-        stack = lambda name: jnp.stack([getattr(p, name) for p in free])
+        stack = lambda name: jnp.stack([getattr(p, name) for p in pts])
         return stack("mass"), stack("volume"), stack("CdA"), stack("Ca")
 
     # -- rigid frames
@@ -672,7 +760,25 @@ class LineNetwork(AbstractModel):
         kind, i = self.topology.frames.owner[f]
         if kind == "earth":
             return jnp.zeros(3), jnp.eye(3)
-        return self.rods[i].end_a, jnp.eye(3)
+        if kind == "body":
+            body = self.bodies[i]
+            return body.position, rotation_matrix(body.rotation)
+        rod = self.rods[i]
+        if rod.body is None:
+            return rod.end_a, jnp.eye(3)
+        p, R = self._frame_start(1 + rod.body)
+        return p + R @ rod.end_a, jnp.eye(3)
+
+    def _rod_local(self, r):
+        """End A and the unit axis of rod r in the coordinates of its frame (its
+        body's or the earth's for a fixed rod, its own for the others)."""
+        rod = self.rods[r]
+        if rod.kind == "fixed":
+            return rod.end_a, rod.axis()
+        if rod.body is None:
+            return jnp.zeros(3), rod.axis()
+        _, R = self._frame_start(1 + rod.body)
+        return jnp.zeros(3), R @ rod.axis()
 
     def initial_rigid_rows(self, y):
         """`y` with the rows of the rigid frames at their initial pose, at rest."""
@@ -683,7 +789,7 @@ class LineNetwork(AbstractModel):
                 y = y.at[frames.trans_row[f]].set(jnp.concatenate([p0, jnp.zeros(3)]))
             if frames.rot_rows[f] is not None:
                 r1, r2 = frames.rot_rows[f]
-                q = jnp.asarray(matrix_quat(np.asarray(R0)))
+                q = matrix_to_quat(R0)
                 y = y.at[r1].set(jnp.concatenate([q[1:], jnp.zeros(3)]))
                 y = y.at[r2].set(jnp.zeros(6).at[0].set(q[0]))
         return y
@@ -699,7 +805,11 @@ class LineNetwork(AbstractModel):
         for f in range(len(fr.owner)):
             p0, R0 = self._frame_start(f)
             kind, i = fr.owner[f]
-            motion = self.rods[i].motion if kind == "rod" else None
+            motion = None
+            if kind == "rod":
+                motion = self.rods[i].motion
+            elif kind == "body" and self.body_motions:
+                motion = self.body_motions[i]
             if motion is not None:
                 mf = motion.frame(t, p0, R0)
             else:
@@ -712,7 +822,7 @@ class LineNetwork(AbstractModel):
                 p, v, a = mf.position, mf.velocity, mf.acceleration
             elif fr.trans[f] == "pin":
                 P = out[fr.parent[f]]
-                rho = P.rotation @ (p0 - self._frame_start(fr.parent[f])[0])
+                rho = P.rotation @ self.rods[i].end_a
                 p = P.position + rho
                 v = P.velocity + jnp.cross(P.omega, rho)
                 a = (P.acceleration + jnp.cross(P.alpha, rho)
@@ -721,7 +831,7 @@ class LineNetwork(AbstractModel):
             if fr.rot[f] == "state":
                 r1, r2 = fr.rot_rows[f]
                 q = jnp.concatenate([y[r2, :1], y[r1, :3]])
-                R, w = quat_matrix(q), y[r1, 3:]
+                R, w = quat_to_matrix(q), y[r1, 3:]
             elif fr.rot[f] == "motion":
                 R, w, al = mf.rotation, mf.omega, mf.alpha
             out.append(Frame(p, R, v, w, a, al))
@@ -734,24 +844,30 @@ class LineNetwork(AbstractModel):
         for r, rod in enumerate(self.rods):
             f = fr.rod_frame[r]
             F = frames[f]
-            local_a = rod.end_a - self._frame_start(f)[0]
-            axis0 = rod.axis()
+            local_a, axis0 = self._rod_local(r)
             a = F.position + F.rotation @ local_a
             q = F.rotation @ axis0
             out.append((a, q, rod.length, f))
         return out
 
     def _rigid_slots(self, frames, rods):
-        """Positions and velocities of the rigid slots (rod ends), `(K, 3)`."""
-        if not rods:
-            z = jnp.zeros((0, 3))
-            return z, z
+        """Positions and velocities of the rigid slots (rod ends, then points on
+        bodies), `(K, 3)`."""
         pos, vel = [], []
         for a, q, L, f in rods:
             F = frames[f]
             va = F.velocity + jnp.cross(F.omega, a - F.position)
             pos += [a, a + L * q]
             vel += [va, va + jnp.cross(F.omega, L * q)]
+        for i in self.topology.on_body:
+            p = self.points[i]
+            F = frames[1 + p.body]
+            rho = F.rotation @ p.position
+            pos.append(F.position + rho)
+            vel.append(F.velocity + jnp.cross(F.omega, rho))
+        if not pos:
+            z = jnp.zeros((0, 3))
+            return z, z
         return jnp.stack(pos), jnp.stack(vel)
 
     # -- one evaluation
@@ -764,7 +880,7 @@ class LineNetwork(AbstractModel):
                     f"Seabed); got {type(e).__name__} in `effects`."
                 )
         hp, hv, ha = self.held_kinematics(t)
-        frames = self.frames(t, y) if self.rods else []
+        frames = self.frames(t, y) if (self.rods or self.bodies) else []
         rods = self._rod_geometry(frames)
         sp, sv = self._rigid_slots(frames, rods)
         tri = y[top.tri_rows]
@@ -811,10 +927,12 @@ class LineNetwork(AbstractModel):
                 t_a = t_b = jnp.zeros((0, 3))
             f_bend, curvature = bending_forces(qs, lstr, self.EI[sl], bend, t_a, t_b, M)
             node_f = node_f + f_bend
-        fm, fv, fcda, fca = self._free_params()
-        free_idx = np.asarray(top.free, np.int32)
-        fp = Bp[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
-        fvel = Bv[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
+        # the points with loads of their own: free points and points on bodies
+        loaded = top.free + top.on_body
+        fm, fv, fcda, fca = self._point_params(loaded)
+        slots = top.point_body[np.asarray(loaded, np.int32)]
+        fp = Bp[slots] if loaded else jnp.zeros((0, 3))
+        fvel = Bv[slots] if loaded else jnp.zeros((0, 3))
         kin = ChainKinematics(
             positions=R,
             velocities=V,
@@ -846,11 +964,10 @@ class LineNetwork(AbstractModel):
         nB = top.n_bodies
         body_f = jnp.zeros((nB, 3)).at[top.body].add(node_f)
         body_m = jnp.zeros((nB, 3, 3)).at[top.body].add(node_m)
-        if len(top.free):
-            rows = top.free_rows
-            body_f = body_f.at[rows].add(point_f)
+        if loaded:
+            body_f = body_f.at[slots].add(point_f)
             pm = fm + env.rho_water * fv * fca
-            body_m = body_m.at[rows].add(pm[:, None, None] * eye)
+            body_m = body_m.at[slots].add(pm[:, None, None] * eye)
         return _State(
             kin=kin,
             seg_tension=T,
@@ -867,6 +984,7 @@ class LineNetwork(AbstractModel):
             curvature=curvature,
             frames=frames,
             rods=rods,
+            rigid_pos=sp,
         )
 
     def _rod_loads(self, st, r, t, effects, env):
@@ -898,7 +1016,7 @@ class LineNetwork(AbstractModel):
             .at[top.tri_rows]
             .set(jnp.concatenate([tri[:, 3:], acc], axis=1))
         )
-        if not self.rods:
+        if not (self.rods or self.bodies):
             return dy, jnp.concatenate([acc, st.held_acc], axis=0), [], []
         fr = top.frames
         frames = list(st.frames)
@@ -914,22 +1032,28 @@ class LineNetwork(AbstractModel):
                 pins.append(None if p is None else frames[f].position
                             - frames[p].position)  # fmt: skip
             sets, rots = [], []
+            for f in members:
+                kind, b = fr.owner[f]
+                if kind == "body" and fr.has_dof(f):
+                    pos, mass, force, inertia, moment = self._body_loads(
+                        b, frames[f], t, effects, env
+                    )
+                    sets.append(PointSet(local[f], pos, mass, force))
+                    rots.append(Rotational(local[f], inertia, moment))
             for r in range(len(self.rods)):
                 f = fr.rod_frame[r]
                 if f in local and fr.has_dof(f):
                     ld = self._rod_loads(st, r, t, effects, env)
                     sets.append(PointSet(local[f], ld.positions, ld.masses, ld.forces))
                     rots.append(Rotational(local[f], ld.inertia, ld.moment))
-            slots = [s for s in range(top.slot_frame.shape[0])
-                     if int(top.slot_frame[s]) in local
-                     and fr.has_dof(int(top.slot_frame[s]))]  # fmt: skip
-            for s in slots:
-                k = start + s
-                pos = self._rigid_slots(frames, st.rods)[0][s]
-                sets.append(
-                    PointSet(local[int(top.slot_frame[s])], pos[None],
-                             st.body_mass[k][None], st.body_force[k][None])
-                )  # fmt: skip
+            for f in members:
+                on = np.nonzero(top.slot_frame == f)[0]
+                if len(on) and fr.has_dof(f):
+                    k = start + on
+                    pset = PointSet(
+                        local[f], st.rigid_pos[on], st.body_mass[k], st.body_force[k]
+                    )
+                    sets.append(pset)
             _, acc_g, alp_g = group_accelerations(
                 [frames[f] for f in members], dofs, parents, pins, sets, rots
             )
@@ -946,16 +1070,55 @@ class LineNetwork(AbstractModel):
                     dy = dy.at[r1].set(jnp.concatenate([qd[1:], alp_g[k]]))
                     dy = dy.at[r2, 0].set(qd[0])
         # accelerations of the rigid slots
-        pos, _ = self._rigid_slots(frames, st.rods)
-        slot_acc = []
+        pos = st.rigid_pos
+        slot_acc = [jnp.zeros((0, 3))]
         for s in range(top.slot_frame.shape[0]):
             f = int(top.slot_frame[s])
             F = frames[f]
             rho = pos[s] - F.position
-            slot_acc.append(acc_f[f] + jnp.cross(alp_f[f], rho)
-                            + jnp.cross(F.omega, jnp.cross(F.omega, rho)))  # fmt: skip
-        body_acc = jnp.concatenate([acc, st.held_acc, jnp.stack(slot_acc)], axis=0)
+            a = acc_f[f] + jnp.cross(alp_f[f], rho)
+            slot_acc.append((a + jnp.cross(F.omega, jnp.cross(F.omega, rho)))[None])
+        body_acc = jnp.concatenate([acc, st.held_acc] + slot_acc, axis=0)
         return dy, body_acc, acc_f, alp_f
+
+    def _body_loads(self, b, F, t, effects, env):
+        """Body b's own mass and loads (MoorDyn's Body): its mass at its centre of
+        gravity with its weight and its buoyancy rho V g (MoorDyn puts the
+        buoyancy there too: the deck has no centre of buoyancy), its added mass
+        rho V R diag(Ca) R^T and translational drag 1/2 rho R diag(CdA) R^T |u| u
+        at the reference point, and its rotational inertia R diag(I) R^T about
+        the centre of gravity with the rotational drag -1/2 rho R diag(CdA_rot)
+        R^T |omega| omega. Returns positions `(2, 3)`, masses `(2, 3, 3)`,
+        forces `(2, 3)`, the inertia `(3, 3)` and the moment `(3,)`."""
+        body = self.bodies[b]
+        R, p = F.rotation, F.position
+        rho, g = env.rho_water, env.g
+        eye = jnp.eye(3)
+        cg = p + R @ body.cg
+        added = rho * body.volume * (R * body.Ca[None, :]) @ R.T
+        f_cg = jnp.zeros(3)
+        f_ref = jnp.zeros(3)
+        moment = jnp.zeros(3)
+        for e in effects:
+            if isinstance(e, Gravity):
+                f_cg = f_cg.at[2].add(-body.mass * g)
+            elif isinstance(e, Buoyancy):
+                f_cg = f_cg.at[2].add(rho * body.volume * g)
+            elif isinstance(e, Drag):
+                u = -F.velocity
+                if env.current is not None:
+                    u = u + env.current(t, p[None])[0]
+                Ct = (R * body.CdA[None, :3]) @ R.T
+                Cr = (R * body.CdA[None, 3:]) @ R.T
+                f_ref = f_ref + 0.5 * rho * e.scale * safe_norm(u) * (Ct @ u)
+                moment = moment - 0.5 * rho * e.scale * safe_norm(F.omega) * (
+                    Cr @ F.omega
+                )
+        pos = jnp.stack([cg, p])
+        mass = jnp.stack([body.mass * eye, added])
+        force = jnp.stack([f_cg, f_ref])
+        inertia = (R * body.inertia[None, :]) @ R.T
+        return pos, mass, force, inertia, moment
 
     def vector_field(self, t, y, effects, env):
         st = self._state(t, y, effects, env)
@@ -1025,7 +1188,7 @@ class LineNetwork(AbstractModel):
             "point_force": pf,
             "lengths": st.lengths,
         }
-        if not self.rods:
+        if not (self.rods or self.bodies):
             v = y[:, 3:]
             ke = 0.5 * jnp.sum(
                 jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
@@ -1205,19 +1368,21 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     t0 = jnp.asarray(t0, jnp.float64)
     hp = np.asarray(model.held_kinematics(t0)[0])
     pos = np.zeros((top.n_state, 3))
+    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
+    ends = np.zeros((0, 3))
+    if model.rods or model.bodies:
+        frames = model.frames(t0, rigid)
+        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
     pts = []
     for i, p in enumerate(model.points):
         if isinstance(p, FreePoint):
             pts.append(np.asarray(p.position))
+        elif isinstance(p, BodyPoint):
+            pts.append(ends[2 * len(model.rods) + top.on_body.index(i)])
         else:
             pts.append(hp[top.held.index(i)])
     for i, r in zip(top.free, top.free_rows):
         pos[top.tri_rows[r]] = pts[i]
-    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
-    ends = np.zeros((0, 3))
-    if model.rods:
-        frames = model.frames(t0, rigid)
-        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
 
     def at(e):
         if isinstance(e, RodEnd):

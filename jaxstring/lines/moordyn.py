@@ -33,8 +33,10 @@ import numpy as np
 from .._environment import Environment
 from .._scene import Scene
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
+from .bodies import Body, rotation_matrix
 from .effects import Seabed
-from .models import FreePoint, LineNetwork, equilibrium
+from .models import BodyPoint, FreePoint, LineNetwork, equilibrium
+from .rigid import RigidMotion
 from .rods import Rod, RodEnd
 
 
@@ -691,20 +693,8 @@ def end_position(deck: MoorDynDeck, end) -> np.ndarray:
     if body is None:
         return local
     b = deck.bodies[body - 1]
-    return np.asarray(b["position"]) + euler_matrix(b["angles"]) @ local
-
-
-def euler_matrix(angles) -> np.ndarray:
-    """MoorDyn's orientation matrix of Euler angles (rad): Rx(a0) Ry(a1) Rz(a2)."""
-    out = np.eye(3)
-    for axis, a in enumerate(angles):
-        c, s = math.cos(a), math.sin(a)
-        i, j = [k for k in range(3) if k != axis]
-        r = np.eye(3)
-        r[i, i] = r[j, j] = c
-        r[i, j], r[j, i] = (-s, s) if axis != 1 else (s, -s)
-        out = out @ r
-    return out
+    R = np.asarray(rotation_matrix(jnp.asarray(b["angles"])))
+    return np.asarray(b["position"]) + R @ local
 
 
 def _line_row(where, fields, types, points, rods, bodies):
@@ -774,8 +764,10 @@ def _option_row(where, fields, raw, numerics):
 
 
 def read_motion(path, n_coupled=None):
-    """A motion table: whitespace-separated rows `t x y z [rx ry rz]` (s, m, rad;
-    the rotations must be 0). Returns `(times (K,), offsets (K, 3))`."""
+    """A motion table: whitespace-separated rows `t x y z [rx ry rz]` (s, m, rad):
+    the offsets of the coupled objects from their deck poses (MoorDyn's Euler
+    angles for the rotations). Returns `(times (K,), offsets (K, 3) or (K, 6))`."""
+    del n_coupled
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ValueError(f"`motion`: no motion table at {path!r}.")
@@ -786,35 +778,48 @@ def read_motion(path, n_coupled=None):
     if data.shape[1] not in (4, 7):
         raise ValueError(
             f"`motion`: {path} has {data.shape[1]} columns; valid: 4 (t x y z) or 7 "
-            "(t x y z rx ry rz with zero rotations)."
-        )
-    if data.shape[1] == 7 and np.any(data[:, 4:] != 0):
-        raise ValueError(
-            f"`motion`: {path} has non-zero rotations (columns 5-7); only "
-            "translations of the coupled points are supported."
+            "(t x y z rx ry rz)."
         )
     t = data[:, 0]
     if data.shape[0] < 2 or np.any(np.diff(t) <= 0):
         raise ValueError(f"`motion`: the times in {path} must increase strictly.")
-    return t, data[:, 1:4]
+    return t, data[:, 1:]
 
 
 def ramp_in(times, offsets, duration):
     """A motion table's offsets ramped in over its first `duration` seconds:
     times sin^2(pi/2 (t - t0)/duration), so that a table that starts at full
     speed (such as ZZP1_A1 at t = -10 s) starts from rest with no step in the
-    point's velocity. Returns the offsets `(K, 3)`, m."""
+    point's velocity. Returns the offsets `(K, 3)` or `(K, 6)`, m (and rad)."""
     times = np.asarray(times, float)
     offsets = np.asarray(offsets, float)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"`duration` must be > 0 s; got {duration!r}.")
-    if offsets.shape != (times.shape[0], 3):
+    if (
+        offsets.ndim != 2
+        or offsets.shape[0] != times.shape[0]
+        or (offsets.shape[1] not in (3, 6))
+    ):
         raise ValueError(
-            f"`offsets` must have shape ({times.shape[0]}, 3) (one row per time); "
-            f"got {offsets.shape}."
+            f"`offsets` must have shape ({times.shape[0]}, 3) or "
+            f"({times.shape[0]}, 6) (one row per time); got {offsets.shape}."
         )
     s = np.clip((times - times[0]) / duration, 0.0, 1.0)
     return offsets * (np.sin(0.5 * np.pi * s) ** 2)[:, None]
+
+
+def _motion_key(key):
+    """('point', ID), ('body', ID) or ('rod', ID) of a `motion` dict key: a point
+    ID, or "body<n>" / "rod<n>" (any case)."""
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        return ("point", int(key))
+    parts = _decompose(str(key)) or []
+    if len(parts) == 2 and parts[0] in ("BODY", "B", "ROD", "R") and parts[1].isdigit():
+        return ("body" if parts[0][0] == "B" else "rod", int(parts[1]))
+    raise ValueError(
+        f"`motion` key {key!r} is not valid; valid: a coupled point's ID, "
+        "'body<n>' or 'rod<n>' of a coupled body or rod."
+    )
 
 
 def deck_scene(
@@ -830,14 +835,19 @@ def deck_scene(
 
     **Arguments:**
 
-    - `motion`: None (coupled points held at their deck positions), a motion table
-      path or `(times, offsets (K, 3))`: a translation added to every coupled
-      point's deck position, or a dict {point ID: any jaxstring end condition}.
+    - `motion`: None (coupled objects held at their deck poses); a motion table
+      path or `(times, offsets (K, 3) or (K, 6))`: a translation added to every
+      coupled point's deck position and a pose offset (translation, then
+      MoorDyn's Euler angles in rad) of every coupled or coupled-pinned body and
+      rod (a coupled point has no orientation: non-zero rotations need the
+      fairleads on a coupled body); or a dict {point ID: any jaxstring end
+      condition, "body<n>" or "rod<n>": a `RigidMotion`}.
     - `t0`, `t1`: the time span, s (default: the motion table's span, else 0 and
       10 s).
-    - `static`: start from the static equilibrium at t0 (`equilibrium`), else from
-      the catenary guess (`initial_shape`).
-    - `free_points`: "hold" (MoorDyn's initial condition) or "solve".
+    - `static`: start from the static equilibrium at t0 (`equilibrium`: the
+      lines settle, bodies and rods held at their deck poses), else from the
+      catenary guess (`initial_shape`; MoorDyn's start with TmaxIC 0).
+    - `free_points`: "hold" (free points held too) or "solve".
     - `axial_drag`: the reference area of the line types' CdAx per unit length,
       `"surface"` (pi d, MoorDyn's) or `"diameter"` (d, DNV-OS-E301's and
       OrcaFlex's chain convention; see `Drag`).
@@ -852,23 +862,31 @@ def deck_scene(
         times, offsets = read_motion(motion)
     elif isinstance(motion, tuple):
         times, offsets = (np.asarray(m, float) for m in motion)
-    if deck.bodies:
-        b = deck.bodies[0]
-        raise ValueError(
-            f"{deck.path}: line {b['line']}: bodies (BODIES) are not simulated yet; "
-            "valid: decks of lines, points and fixed rods."
-        )
-    coupled = [p for p in deck.points if p["kind"] == "coupled"]
-    ends = {}
+        if offsets.ndim != 2 or offsets.shape[1] not in (3, 6):
+            raise ValueError(
+                f"`motion` offsets must have shape (K, 3) or (K, 6); got "
+                f"{offsets.shape}."
+            )
+    coupled = {("point", p["id"]) for p in deck.points if p["kind"] == "coupled"}
+    coupled |= {("body", b["id"]) for b in deck.bodies
+                if b["kind"] in ("coupled", "coupled_pinned")}  # fmt: skip
+    coupled |= {("rod", r["id"]) for r in deck.rods
+                if r["kind"] in ("coupled", "coupled_pinned")}  # fmt: skip
+    given = {}
     if isinstance(motion, dict):
-        unknown = set(motion) - {p["id"] for p in coupled}
+        given = {_motion_key(k): v for k, v in motion.items()}
+        unknown = sorted(set(given) - coupled)
         if unknown:
             raise ValueError(
-                f"`motion` names points {sorted(unknown)} that are not coupled "
-                f"(coupled: {[p['id'] for p in coupled]})."
+                f"`motion` names {unknown} that are not coupled (coupled: "
+                f"{sorted(coupled)})."
             )
-        ends = dict(motion)
-    points, index = [], {}
+        for k, v in given.items():
+            if k[0] != "point" and not isinstance(v, RigidMotion):
+                raise ValueError(
+                    f"`motion` for {k[0]} {k[1]} must be a RigidMotion; got {v!r}."
+                )
+    table6 = None
     smoothing = 0.0
     if times is not None:
         # Smooth the knots over one sample (a box filter: C1 motion for the
@@ -877,18 +895,46 @@ def deck_scene(
         smoothing = float(np.min(np.diff(times)))
         times = np.append(times, 2 * times[-1] - times[-2])
         offsets = np.concatenate([offsets, 2 * offsets[-1:] - offsets[-2:-1]])
+        table6 = np.zeros((len(times), 6))
+        table6[:, : offsets.shape[1]] = offsets
+        if np.any(table6[:, 3:] != 0) and any(k[0] == "point" for k in coupled):
+            raise ValueError(
+                "`motion`: the table has rotations (columns 5-7) and the deck has "
+                "coupled points, which have no orientation; valid: zero rotations, "
+                "or the fairleads as points on a coupled body."
+            )
+
+    def rigid_motion(key):
+        if key in given:
+            return given[key]
+        if table6 is not None:
+            return RigidMotion(times, table6, smoothing)
+        return None
+
+    body_index = {b["id"]: k for k, b in enumerate(deck.bodies)}
+    points, index = [], {}
     for p in deck.points:
         index[p["id"]] = len(points)
         pos = np.asarray(p["position"], float)
         if p["kind"] == "free":
             points.append(FreePoint(pos, p["mass"], p["volume"], p["CdA"], p["Ca"]))
-        elif p["id"] in ends:
-            points.append(ends[p["id"]])
+        elif p["kind"] == "body":
+            points.append(BodyPoint(body_index[p["body"]], pos, p["mass"],
+                                    p["volume"], p["CdA"], p["Ca"]))  # fmt: skip
+        elif ("point", p["id"]) in given:
+            points.append(given[("point", p["id"])])
         elif p["kind"] == "coupled" and times is not None:
-            points.append(PrescribedEnd(times, pos + offsets, smoothing))
+            points.append(PrescribedEnd(times, pos + table6[:, :3], smoothing))
         else:
             points.append(FixedEnd(pos))
-    rods = _deck_rods(deck)
+    bodies = tuple(_deck_body(b) for b in deck.bodies)
+    body_motions = tuple(
+        rigid_motion(("body", b["id"])) if b["kind"] != "fixed" else None
+        for b in deck.bodies
+    )
+    if not any(m is not None for m in body_motions):
+        body_motions = ()
+    rods = _deck_rods(deck, rigid_motion)
 
     def end(e):
         return RodEnd(e[0] - 1, e[1]) if isinstance(e, tuple) else index[e]
@@ -913,13 +959,14 @@ def deck_scene(
         # bending is traced only for a deck that names some
         EI=EI if bool(jnp.any(EI > 0)) else None,
         rods=rods,
+        bodies=bodies,
+        body_motions=body_motions,
     )
     effects = [Gravity(), Buoyancy(), Drag(axial_area=axial_drag)]
     if o["rho"] == 0:
         # a deck in vacuum (WtrDnsty 0): no buoyancy, drag or added mass is traced
         effects = [Gravity()]
-        zero = jnp.zeros_like(model.Ca)
-        model = eqx.tree_at(lambda m: (m.Ca, m.CaAx), model, (zero, zero))
+        model = _without_added_mass(model)
     if o["depth"] > 0:
         effects.append(
             Seabed(
@@ -944,21 +991,63 @@ def deck_scene(
     return Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
 
 
-def _deck_rods(deck) -> tuple:
+def _without_added_mass(model):
+    """The network with every added-mass coefficient zero (a deck in vacuum)."""
+    zero = jnp.zeros_like(model.Ca)
+    model = eqx.tree_at(lambda m: (m.Ca, m.CaAx), model, (zero, zero))
+    for i, p in enumerate(model.points):
+        if isinstance(p, (FreePoint, BodyPoint)):
+            model = eqx.tree_at(lambda m: m.points[i].Ca, model, jnp.zeros(()))
+    for r in range(len(model.rods)):
+        model = eqx.tree_at(lambda m: (m.rods[r].Ca, m.rods[r].CaEnd), model,
+                            (jnp.zeros(()), jnp.zeros(())))  # fmt: skip
+    for b in range(len(model.bodies)):
+        model = eqx.tree_at(lambda m: m.bodies[b].Ca, model, jnp.zeros(3))
+    return model
+
+
+_BODY_KIND = {"fixed": "fixed", "free": "free", "coupled": "coupled",
+              "coupled_pinned": "pinned"}  # fmt: skip
+
+
+def _deck_body(b) -> Body:
+    """A deck's body as a `Body`. MoorDyn zeroes the mass, volume, inertia, drag
+    and added mass of fixed and coupled bodies (only what is on them counts)."""
+    kind = _BODY_KIND[b["kind"]]
+    inert = b["kind"] in ("fixed", "coupled")
+    values = {
+        "mass": 0.0 if inert else b["mass"],
+        "cg": b["cg"],
+        "inertia": [0.0] * 3 if inert else b["inertia"],
+        "volume": 0.0 if inert else b["volume"],
+        "CdA": [0.0] * 6 if inert else b["CdA"],
+        "Ca": [0.0] * 3 if inert else b["Ca"],
+    }
+    name = f"body {b['id']}"
+    if kind == "free" and values["mass"] == 0 and values["volume"] == 0:
+        # a free body whose inertia is all in the points and rods on it
+        # (MoorDyn's orbitalBody; parse_moordyn checks that there are some):
+        # built with a placeholder mass, which is then set to zero
+        body = Body(kind, b["position"], b["angles"], **{**values, "mass": 1.0},
+                    name=name)  # fmt: skip
+        return eqx.tree_at(lambda x: x.mass, body, jnp.zeros(()))
+    return Body(kind, b["position"], b["angles"], **values, name=name)
+
+
+def _deck_rods(deck, rigid_motion) -> tuple:
     """The deck's rods as `Rod`s."""
+    body_index = {b["id"]: k for k, b in enumerate(deck.bodies)}
     rods = []
     for r in deck.rods:
-        if r["body"] is not None:
-            raise ValueError(
-                f"{deck.path}: line {r['line']}: rod {r['id']} (on body {r['body']}) "
-                "is not simulated yet; valid: rods on the earth."
-            )
         if r["segments"] == 0:
             raise ValueError(
                 f"{deck.path}: line {r['line']}: rod {r['id']} has NumSegs 0 (a "
                 "zero-length joint), which is not simulated; valid: NumSegs >= 1."
             )
         t = deck.rod_types[r["type"]]
+        motion = None
+        if r["kind"] in ("coupled", "coupled_pinned"):
+            motion = rigid_motion(("rod", r["id"]))
         rods.append(
             Rod(
                 r["end_a"],
@@ -971,6 +1060,8 @@ def _deck_rods(deck) -> tuple:
                 t["CdEnd"],
                 t["CaEnd"],
                 kind=r["kind"],
+                body=None if r["body"] is None else body_index[r["body"]],
+                motion=motion,
             )  # fmt: skip
         )
     return tuple(rods)

@@ -38,81 +38,20 @@ omega) and (q_w, 0, 0, 0, 0, 0).
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array
 
 from .._arrays import f64 as _f64
 from ..chain import PiecewiseLinear
+from .bodies import quat_multiply, rotation_matrix
 
 
 # ---------------------------------------------------------------------------
-# Rotations (quaternions scalar first)
-
-
-def quat_matrix(q):
-    """Rotation matrix of a quaternion `(4,)` (normalised here: the state's
-    quaternion is never renormalised, as in MoorDyn)."""
-    q = q / jnp.linalg.norm(q)
-    w, x, y, z = q
-    return jnp.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+# Rotations (quaternions scalar first; `jaxstring.lines.bodies`)
 
 
 def quat_rate(q, omega):
     """dq/dt = 1/2 (0, omega) x q, omega in earth axes."""
-    w, v = q[0], q[1:]
-    return 0.5 * jnp.concatenate([-(omega @ v)[None], w * omega + jnp.cross(omega, v)])
-
-
-def euler_matrix(angles):
-    """MoorDyn's orientation of Euler angles (rad): Rx(a0) Ry(a1) Rz(a2)."""
-    a, b, c = angles[0], angles[1], angles[2]
-    ca, sa, cb, sb, cc, sc = (jnp.cos(a), jnp.sin(a), jnp.cos(b), jnp.sin(b),
-                              jnp.cos(c), jnp.sin(c))  # fmt: skip
-    o, z = jnp.ones_like(a), jnp.zeros_like(a)
-    rx = jnp.stack([jnp.stack([o, z, z]), jnp.stack([z, ca, -sa]),
-                    jnp.stack([z, sa, ca])])  # fmt: skip
-    ry = jnp.stack([jnp.stack([cb, z, sb]), jnp.stack([z, o, z]),
-                    jnp.stack([-sb, z, cb])])  # fmt: skip
-    rz = jnp.stack([jnp.stack([cc, -sc, z]), jnp.stack([sc, cc, z]),
-                    jnp.stack([z, z, o])])  # fmt: skip
-    return rx @ ry @ rz
-
-
-def matrix_euler(R):
-    """MoorDyn's Euler angles (rad) of a rotation matrix, the middle angle in
-    [-pi/2, pi/2] (inverse of `euler_matrix`)."""
-    b = jnp.arcsin(jnp.clip(R[0, 2], -1.0, 1.0))
-    a = jnp.arctan2(-R[1, 2], R[2, 2])
-    c = jnp.arctan2(-R[0, 1], R[0, 0])
-    return jnp.stack([a, b, c])
-
-
-def matrix_quat(R):
-    """A unit quaternion (scalar first) of a rotation matrix (NumPy, for initial
-    states)."""
-    R = np.asarray(R, float)
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
-             (R[1, 0] - R[0, 1]) / s]  # fmt: skip
-    else:
-        i = int(np.argmax(np.diag(R)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-        q = np.zeros(4)
-        q[0] = (R[k, j] - R[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (R[j, i] + R[i, j]) / s
-        q[1 + k] = (R[k, i] + R[i, k]) / s
-    q = np.asarray(q, float)
-    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)
+    return 0.5 * quat_multiply(jnp.concatenate([jnp.zeros(1), omega]), q)
 
 
 def _vee(S):
@@ -141,7 +80,8 @@ class RigidMotion(eqx.Module):
     rad) of a frame from its initial pose, as a table or a function of time.
 
     The frame's origin is at its initial position plus (dx, dy, dz); its
-    orientation is R(rx, ry, rz) R_0 (MoorDyn's Euler angles, `euler_matrix`),
+    orientation is R(rx, ry, rz) R_0 (MoorDyn's Euler angles,
+    `bodies.rotation_matrix`),
     turned about the moving origin. Velocities and accelerations are the exact
     time derivatives (forward-mode autodiff), the angular velocity the one of
     R(t) (not the Euler-angle rates).
@@ -186,7 +126,7 @@ class RigidMotion(eqx.Module):
         (x, xd), (_, xdd) = jax.jvp(pose_rate, (t,), (jnp.ones_like(t),))
 
         def rot(a):
-            return euler_matrix(a) @ rotation0
+            return rotation_matrix(a) @ rotation0
 
         def omega_of(a, ad):
             R, Rd = jax.jvp(rot, (a,), (ad,))
