@@ -62,7 +62,13 @@ from ..chain import (
     unit,
 )
 from .bending import bending_forces
-from .bodies import Body, matrix_to_quat, quat_to_matrix, rotation_matrix
+from .bodies import (
+    Body,
+    euler_angles,
+    matrix_to_quat,
+    quat_to_matrix,
+    rotation_matrix,
+)
 from .effects import Seabed
 from .rigid import (
     Frame,
@@ -1154,6 +1160,12 @@ class LineNetwork(AbstractModel):
         `rod_end_tension` (`(R, 2)`, N: the magnitude of the lines' end-node
         forces on ends A and B, MoorDyn's TENA, TENB), `rod_nodes` and
         `rod_node_force` (every rod node, rod by rod, see `rod_nodes`); with
+        bodies, per body: `body_position`, `body_velocity`,
+        `body_acceleration` (of its reference point, `(B, 3)`),
+        `body_rotation` (`(B, 3, 3)`, body to earth), `body_angles` (MoorDyn's
+        Euler angles, rad), `body_omega`, `body_alpha` (`(B, 3)`) and
+        `body_force` (`(B, 6)`: force, N, and moment about the reference point,
+        N m, MoorDyn's getFnet, see `_body_observables`); with
         bending stiffness: `curvature` at every line node
         (`(M,)`, 1/m)."""
         st = self._state(t, y, effects, env)
@@ -1213,6 +1225,8 @@ class LineNetwork(AbstractModel):
             out.update(self._rod_observables(t, st, body_acc, acc_f, alp_f,
                                              effects, env))  # fmt: skip
             out["rod_end_force"] = rf.reshape(len(self.rods), 2, 3)
+        if self.bodies:
+            out.update(self._body_observables(t, st, acc_f, alp_f, effects, env))
         if st.curvature is not None:
             out["curvature"] = st.curvature
         return out
@@ -1280,6 +1294,93 @@ class LineNetwork(AbstractModel):
         stack["rod_node_force"] = jnp.concatenate(out["rod_node_force"])
         del body_acc
         return stack
+
+    def _frame_sets(self, st, f, t, effects, env):
+        """What moves rigidly with frame f: lumped masses `(positions, masses,
+        forces)` and rotational inertias `(inertia, moment)` (its body's or
+        rod's own, its fixed rods', its points and rod ends with the lines on
+        them)."""
+        top, fr = self.topology, self.topology.frames
+        sets, rots = [], []
+        kind, i = fr.owner[f]
+        if kind == "body":
+            pos, mass, force, inertia, moment = self._body_loads(
+                i, st.frames[f], t, effects, env
+            )
+            sets.append((pos, mass, force))
+            rots.append((inertia, moment))
+        for r in range(len(self.rods)):
+            if fr.rod_frame[r] == f:
+                ld = self._rod_loads(st, r, t, effects, env)
+                sets.append((ld.positions, ld.masses, ld.forces))
+                rots.append((ld.inertia, ld.moment))
+        on = np.nonzero(top.slot_frame == f)[0]
+        if len(on):
+            k = top.rigid_start + on
+            sets.append((st.rigid_pos[on], st.body_mass[k], st.body_force[k]))
+        return sets, rots
+
+    def _body_observables(self, t, st, acc_f, alp_f, effects, env):
+        """Per body: the reference point's position, velocity and acceleration,
+        the rotation (body to earth) and MoorDyn's Euler angles of it, the
+        angular velocity and acceleration, and MoorDyn's net force and moment
+        about the reference point (`getFnet`): of everything on the body (its
+        own loads, its points and rods with the lines on them, the pin forces of
+        rods pinned to it), less its inertia for a coupled body, and less the
+        inertia force with no moment for a pinned body."""
+        fr = self.topology.frames
+        frames = st.frames
+
+        def accel(f, pos):
+            F = frames[f]
+            rho = pos - F.position
+            return (acc_f[f] + jnp.cross(alp_f[f], rho)
+                    + jnp.cross(F.omega, jnp.cross(F.omega, rho)))  # fmt: skip
+
+        out = {k: [] for k in ("body_position", "body_rotation", "body_angles",
+                               "body_velocity", "body_omega", "body_acceleration",
+                               "body_alpha", "body_force")}  # fmt: skip
+        for b, body in enumerate(self.bodies):
+            f = 1 + b
+            F = frames[f]
+            sets, rots = self._frame_sets(st, f, t, effects, env)
+            force, moment = jnp.zeros(3), jnp.zeros(3)
+            f_in, m_in = jnp.zeros(3), jnp.zeros(3)
+            for pos, mass, fk in sets:
+                rho = pos - F.position
+                inert = jnp.einsum("kij,kj->ki", mass, accel(f, pos))
+                force = force + jnp.sum(fk, 0)
+                moment = moment + jnp.sum(jnp.cross(rho, fk), 0)
+                f_in = f_in + jnp.sum(inert, 0)
+                m_in = m_in + jnp.sum(jnp.cross(rho, inert), 0)
+            for inertia, tau in rots:
+                moment = moment + tau
+                m_in = m_in + inertia @ alp_f[f] + jnp.cross(F.omega, inertia @ F.omega)
+            # rods pinned to the body: the force through the pin
+            for c in range(len(fr.owner)):
+                if fr.parent[c] != f:
+                    continue
+                csets, _ = self._frame_sets(st, c, t, effects, env)
+                pin = jnp.zeros(3)
+                for pos, mass, fk in csets:
+                    inert = jnp.einsum("kij,kj->ki", mass, accel(c, pos))
+                    pin = pin + jnp.sum(fk - inert, 0)
+                force = force + pin
+                moment = moment + jnp.cross(frames[c].position - F.position, pin)
+            F6 = jnp.concatenate([force, moment])
+            if body.kind == "coupled":
+                F6 = F6 - jnp.concatenate([f_in, m_in])
+            elif body.kind == "pinned":
+                F6 = jnp.concatenate([force - f_in, jnp.zeros(3)])
+            out["body_position"].append(F.position)
+            out["body_rotation"].append(F.rotation)
+            out["body_angles"].append(euler_angles(F.rotation))
+            out["body_velocity"].append(F.velocity)
+            out["body_omega"].append(F.omega)
+            out["body_acceleration"].append(acc_f[f])
+            out["body_alpha"].append(alp_f[f])
+            out["body_force"].append(F6)
+        return {k: jnp.stack(v) for k, v in out.items()}
 
     def rod_nodes(self, r: int) -> np.ndarray:
         """Indices of rod `r`'s nodes (A to B) in the `rod_nodes` observable."""

@@ -1134,7 +1134,14 @@ def output_channels(traj, scene: Scene) -> dict:
       `ROD<id>RA{X,Y,Z}` (deg/s^2), `ROD<id>F{X,Y,Z}` (N) and `ROD<id>M{X,Y,Z}`
       (N m, about end A: everything on the rod, less its inertia for a coupled
       rod), `ROD<id>TENA`, `ROD<id>TENB` (the lines' end forces on each end, N),
-      `ROD<id>N<i>P{X,Y,Z}` (nodes, m).
+      `ROD<id>N<i>P{X,Y,Z}` (nodes, m);
+    - per body (IDs 1, 2, ... in deck order): `BODY<id>P{X,Y,Z}` (the
+      reference point, m), `BODY<id>R{X,Y,Z}` (MoorDyn's Euler angles, deg),
+      `BODY<id>V{X,Y,Z}` (m/s), `BODY<id>RV{X,Y,Z}` (deg/s),
+      `BODY<id>A{X,Y,Z}` (m/s^2), `BODY<id>RA{X,Y,Z}` (deg/s^2),
+      `BODY<id>F{X,Y,Z}` (N), `BODY<id>M{X,Y,Z}` (N m, about the reference
+      point) and `BODY<id>TEN` (the force's magnitude, N): MoorDyn's getFnet
+      (`LineNetwork.observables`).
 
     Returns an ordered dict name -> `(T,)`."""
     model = scene.model
@@ -1179,6 +1186,25 @@ def output_channels(traj, scene: Scene) -> dict:
             for i, m in enumerate(model.rod_nodes(r)):
                 for c, axis in enumerate("XYZ"):
                     ch[f"{p}N{i}P{axis}"] = rnodes[:, m, c]
+    if model.bodies:
+        get = lambda key: np.asarray(obs[key])
+        deg = 180.0 / np.pi
+        force = get("body_force")
+        for b in range(len(model.bodies)):
+            p = f"BODY{b + 1}"
+            for key, name, scale in (("body_position", "P", 1.0),
+                                     ("body_angles", "R", deg),
+                                     ("body_velocity", "V", 1.0),
+                                     ("body_omega", "RV", deg),
+                                     ("body_acceleration", "A", 1.0),
+                                     ("body_alpha", "RA", deg)):  # fmt: skip
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, b, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}F{axis}"] = force[:, b, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}M{axis}"] = force[:, b, 3 + c]
+            ch[f"{p}TEN"] = np.linalg.norm(force[:, b, :3], axis=1)
     return ch
 
 

@@ -1,0 +1,218 @@
+"""Floating bodies (MoorDyn's BODIES) checked against MoorDyn 2.7's body tests
+(`bodies.cpp`, with their tolerances), against MoorDyn's own trajectories of
+the same decks, and against rigid-body mechanics:
+
+- excentric body: two free bodies whose mass sits away from their reference
+  point (in two points; in a rod) orbit at radius 10 m and 0.2 rad/s (MoorDyn's
+  criteria: both within 1e-6 relative);
+- rotating body: a free body turned by a line pulled round by a coupled point
+  ends up turned by -90 deg about x (MoorDyn's: the point on the body within
+  atol 0.15 + rtol 0.1 of where it should be after each leg; the final
+  rotation's axis within 0.15 of x, its angle within 10 deg of 90);
+- pinned body: a pendulum (a rod on a massless pinned body) on a cart that
+  accelerates at a swings about atan(-a/g) (MoorDyn's criterion: the mean roll
+  within 0.001 rad of it); its roll follows MoorDyn's;
+- body drag: a free body falls onto its drag; its fall and its net force follow
+  MoorDyn's (RK2, dtM 2 ms);
+- the sensitivity of a body's response to its mass by forward-mode autodiff
+  through the integration agrees with central differences.
+"""
+
+import math
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxstring as js
+from jaxstring import lines
+from jaxstring._fit import SolveConfig, solve
+from jaxstring.chain import PrescribedEnd
+
+
+G = 9.80665
+# MoorDyn 2.7's outputs on these decks (data/README.md)
+MOORDYN = np.load(os.path.join(os.path.dirname(__file__), "data", "moordyn_bodies.npz"))
+
+
+def _deck(name):
+    return lines.case_path(f"body_tests/{name}")
+
+
+def _quaternion(R):
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix."""
+    w = 0.5 * math.sqrt(max(1.0 + np.trace(R), 0.0))
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return np.concatenate([[w], v / (4 * w)])
+
+
+def test_excentric_body_orbits():
+    """MoorDyn's excentric-body test: each body starts with its reference point
+    moving at (0, 0, 2) m/s and turning at 0.2 rad/s about x, so that its mass
+    (two 20 kg points; a 4 m rod) at (0, 0, 20) stays at rest and the reference
+    point orbits it: radius 10 m and angle 0.2 t within 1e-6 relative after
+    every 0.25 s (measured: 6e-13 and 9e-12)."""
+    scene = lines.read_moordyn(_deck("orbitalBody.txt"), static=False, t1=10.0)
+    fr = scene.model.topology.frames
+    y0 = scene.y0
+    for f in (1, 2):
+        y0 = y0.at[fr.trans_row[f], 3:].set(jnp.array([0.0, 0.0, 2.0]))
+        y0 = y0.at[fr.rot_rows[f][0], 3:].set(jnp.array([0.2, 0.0, 0.0]))
+    scene = eqx.tree_at(lambda s: s.y0, scene, y0)
+    ts = np.arange(1, 41) * 0.25
+    traj = js.simulate(scene, "tsit5", rtol=1e-12, atol=1e-12, ts=ts)
+    assert traj.ok
+    p = np.asarray(traj.obs["body_position"])  # (T, 2, 3)
+    q = (p - [0.0, 0.0, 20.0]) / 10.0
+    err_r = np.linalg.norm(p - [0.0, 0.0, 20.0], axis=-1) - 10.0
+    err_w = np.arctan2(q[..., 2], q[..., 1]) / ts[:, None] - 0.2
+    assert np.max(np.abs(err_r)) <= 1e-6 * 10.0  # MoorDyn's
+    assert np.max(np.abs(err_w)) <= 1e-6 * 0.2  # MoorDyn's
+    assert np.max(np.abs(err_r)) < 1e-10 and np.max(np.abs(err_w)) < 1e-10
+
+
+def _rotating_body_path():
+    """Coupled point 9 of MoorDyn's rotating-body test: three quarter turns of
+    radius 2 m about the body's centre c in 2 s each (sampled every 0.1 s, as
+    the test does), each followed by 0.5 s held 2.05 m from c; the times at
+    the ends of the holds and where the point on the body should be then."""
+    c = np.array([0.0, 0.0, 5.0])
+    legs = [lambda a: (math.cos(a), 0, math.sin(a)),
+            lambda a: (0, math.sin(a), math.cos(a)),
+            lambda a: (math.sin(a), math.cos(a), 0)]  # fmt: skip
+    ends = [(0, 0, 1.0), (0, 1.0, 0), (1.0, 0, 0)]
+    T, X, checks = [0.0], [c + [2.0, 0, 0]], []
+    t = 0.1
+    for leg, e in zip(legs, ends):
+        for i in range(21):
+            T.append(t + 0.1 * i)
+            X.append(c + 2.0 * np.array(leg(0.25 * math.pi * 0.1 * i)))
+        t += 2.0
+        T.append(t + 0.1)
+        X.append(c + 2.05 * np.array(e))
+        t += 0.5
+        checks.append(t)
+    T.append(t + 0.1)
+    X.append(X[-1])
+    return c, np.array(T), np.array(X), np.array(checks), np.array(ends)
+
+
+def test_rotating_body():
+    """MoorDyn's rotating-body test (MoorDyn gives (-0.02, 0, 1.01),
+    (0.01, 1.01, 0.00), (1.01, 0.08, -0.02) and a turn of 89.7 deg about
+    (-0.998, -0.030, 0.053); here (0.03, 0, 1.00), (-0.04, 1.00, 0.02),
+    (1.01, -0.08, -0.03) and 91.4 deg about (-0.998, 0.054, -0.022))."""
+    c, T, X, checks, ends = _rotating_body_path()
+    scene = lines.read_moordyn(_deck("rotatingBody.txt"), static=False,
+                               motion={9: PrescribedEnd(T, X)},
+                               t1=float(checks[-1]))  # fmt: skip
+    traj = js.simulate(scene, "tsit5", rtol=1e-8, atol=1e-8, ts=checks)
+    assert traj.ok
+    p = np.asarray(traj.obs["body_position"][:, 0])
+    R = np.asarray(traj.obs["body_rotation"][:, 0])
+    point8 = p + R @ np.array([1.0, 0.0, 0.0])
+    for k in range(3):
+        np.testing.assert_allclose(point8[k] - c, ends[k], rtol=0.1, atol=0.15)
+    q = _quaternion(R[-1])
+    angle = math.degrees(2 * math.acos(q[0]))
+    axis = q[1:] / math.sqrt(1 - q[0] ** 2)
+    assert abs(axis[0]) > 0.85 and abs(axis[1]) < 0.2 and abs(axis[2]) < 0.2
+    assert abs(((angle + 180) % 360 - 180) - 90) < 10
+    assert axis[0] < 0  # about -x, as MoorDyn's
+
+
+def test_pinned_body_swings_about_the_cart_angle():
+    """MoorDyn's pinned-body test: a massless pinned body carrying a 10 m rod
+    (3 segments, 50 t) in vacuum, its pin moved at a = 0.5 m/s^2 along y: the
+    rod swings between 0 and 2 atan(-a/g); the mean roll over two swings
+    (sampled every 0.01 s until the fourth turning point after 0.3 s) within
+    0.001 rad of atan(-a/g) (MoorDyn: 5.2e-5; here 5.2e-5), and the roll within
+    2e-5 rad of MoorDyn's at every sample (measured 4.6e-6: MoorDyn's RK2 with
+    a 1 ms step)."""
+    a = 0.5
+    motion = lines.RigidMotion(
+        fn=lambda t, acc: jnp.stack([0 * t, 0.5 * acc * t**2, 0 * t, 0 * t, 0 * t,
+                                     0 * t]),
+        params=jnp.asarray(a),
+    )  # fmt: skip
+    scene = lines.read_moordyn(_deck("pinnedBody.txt"), static=False,
+                               motion={"body1": motion}, t1=13.5)  # fmt: skip
+    ts = 0.01 * np.arange(1, 1351)
+    traj = js.simulate(scene, "tsit5", rtol=1e-9, atol=1e-9, ts=ts)
+    assert traj.ok
+    roll = np.asarray(traj.obs["body_angles"][:, 0, 0])
+    np.testing.assert_allclose(
+        np.asarray(traj.obs["body_position"][:, 0]),
+        np.stack([0 * ts, 0.5 * a * ts**2, 0 * ts - 5.0], 1), atol=1e-12,
+    )  # fmt: skip
+    slope = np.diff(roll)
+    turns = np.nonzero(slope[1:] * slope[:-1] < 0)[0] + 2
+    n = turns[turns >= 30][3] + 1
+    theta = math.atan(-a / G)
+    assert abs(np.mean(roll[:n]) - theta) <= 0.001  # MoorDyn's
+    assert abs(np.mean(roll[:n]) - theta) < 1e-4
+    assert np.min(roll) == pytest.approx(2 * theta, abs=2e-4)
+    md = MOORDYN["pinned_roll"]
+    assert np.max(np.abs(roll[: len(md)] - md)) < 2e-5
+
+
+def test_body_drag_and_output_channels(tmp_path):
+    """MoorDyn's body-drag test (a free body pitched by -90 deg with drag on
+    all six axes falls at nearly its terminal speed; MoorDyn's test checks only
+    that it runs): the body's height and speed within 2e-4 m and 5e-5 m/s of
+    MoorDyn's every 0.1 s for 5 s (measured 7e-5 and 2e-5, MoorDyn's RK2 with a
+    2 ms step), its net force (MoorDyn's getFnet) within 2e-2 N after the first
+    second; the BODY1 channels in the .out and .npz files."""
+    tint = MOORDYN["drag_t"]
+    scene = lines.read_moordyn(_deck("bodyDrag.txt"), static=False,
+                               t1=float(tint[-1]))  # fmt: skip
+    traj = js.simulate(scene, "tsit5", rtol=1e-9, atol=1e-9, ts=tint)
+    assert traj.ok
+    obs = traj.obs
+    p, v = (
+        np.asarray(obs["body_position"][:, 0]),
+        np.asarray(obs["body_velocity"][:, 0]),
+    )
+    np.testing.assert_allclose(p, MOORDYN["drag_r"][:, :3], atol=2e-4)
+    np.testing.assert_allclose(v, MOORDYN["drag_rd"][:, :3], atol=5e-5)
+    ang = np.asarray(obs["body_angles"][:, 0])
+    np.testing.assert_allclose(ang, MOORDYN["drag_r"][:, 3:], atol=1e-12)
+    F = np.asarray(obs["body_force"][:, 0])
+    late = tint >= 1.0
+    np.testing.assert_allclose(F[late], MOORDYN["drag_f"][late], atol=2e-2)
+    out, npz = lines.write_outputs(traj, scene, tmp_path / "drag")
+    with open(out) as f:
+        names = f.readline().rstrip("\n").split("\t")
+        units = f.readline().rstrip("\n").split("\t")
+    assert names[units.index("(deg)")] == "BODY1RX"
+    for name in ("BODY1PZ", "BODY1RY", "BODY1VZ", "BODY1RVX", "BODY1AZ",
+                 "BODY1RAX", "BODY1FZ", "BODY1MX", "BODY1TEN"):  # fmt: skip
+        assert name in names
+    ch = np.load(npz)
+    np.testing.assert_allclose(ch["BODY1PZ"], p[:, 2])
+    np.testing.assert_allclose(ch["BODY1RY"], -90.0, atol=1e-10)
+    np.testing.assert_allclose(ch["BODY1TEN"], np.abs(F[:, 2]))
+
+
+@pytest.mark.slow
+def test_body_mass_gradient_matches_central_differences():
+    """d z(t = 0.5 s)/d m of the falling drag body, forward-mode autodiff
+    through the integration against central differences (h = 1e-3 m): within
+    1e-5 relative (measured 4e-8)."""
+    scene = lines.read_moordyn(_deck("bodyDrag.txt"), static=False, t1=0.5)
+    config = SolveConfig(solver="tsit5", rtol=1e-11, atol=1e-11,
+                         ts=jnp.array([0.5]), adjoint="forward")  # fmt: skip
+
+    def z(m):
+        s = eqx.tree_at(lambda s: s.model.bodies[0].mass, scene, m)
+        return solve(s, config).obs["body_position"][-1, 0, 2]
+
+    m0 = 10.0
+    dz = float(jax.jacfwd(z)(jnp.asarray(m0)))
+    h = 1e-3 * m0
+    fd = (float(z(jnp.asarray(m0 + h))) - float(z(jnp.asarray(m0 - h)))) / (2 * h)
+    assert dz < 0  # heavier: falls further
+    assert abs(dz - fd) <= 1e-5 * abs(fd)
