@@ -14,6 +14,8 @@ the same decks, and against rigid-body mechanics:
   within 0.001 rad of it); its roll follows MoorDyn's;
 - body drag: a free body falls onto its drag; its fall and its net force follow
   MoorDyn's (RK2, dtM 2 ms);
+- bodies and rods: a free body carrying a fixed and a pinned rod, moored by
+  three lines and a buoyed cable, sinks as MoorDyn's does (slow);
 - the sensitivity of a body's response to its mass by forward-mode autodiff
   through the integration agrees with central differences.
 """
@@ -195,6 +197,31 @@ def test_body_drag_and_output_channels(tmp_path):
     np.testing.assert_allclose(ch["BODY1PZ"], p[:, 2])
     np.testing.assert_allclose(ch["BODY1RY"], -90.0, atol=1e-10)
     np.testing.assert_allclose(ch["BODY1TEN"], np.abs(F[:, 2]))
+
+
+# MoorDyn 2.7's body height in BodiesAndRods.dat every 0.1 s from 0.1 s to 1 s
+# (after its initial-condition solve of the lines, 0.12 s), m
+BODIES_AND_RODS_Z = [-0.0501960165, -0.197000114, -0.441306318, -0.782648719,
+                     -1.22039236, -1.75338574, -2.37900287, -3.08014295,
+                     -3.82895879, -4.59655578]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_bodies_and_rods_sinks_as_moordyn():
+    """MoorDyn's bodies-and-rods test (it checks that 1 s runs and stays
+    finite): the 1e6 kg body with its two rods (one fixed, one pinned to it)
+    sinks within 1e-2 m of MoorDyn's height every 0.1 s (measured 7e-3 m at
+    1 s, from the lines' catenary start where MoorDyn first relaxes them) and
+    stays level (pitch below 1e-3 rad; MoorDyn 5e-5)."""
+    scene = lines.read_moordyn(lines.case_path("BodiesAndRods.dat"), t1=1.0,
+                               static=False)  # fmt: skip
+    ts = np.linspace(0.1, 1.0, 10)
+    traj = js.simulate(scene, "tsit5", rtol=1e-6, atol=1e-6, ts=ts)
+    assert traj.ok
+    z = np.asarray(traj.obs["body_position"][:, 0, 2])
+    np.testing.assert_allclose(z, BODIES_AND_RODS_Z, atol=1e-2)
+    assert np.all(np.isfinite(np.asarray(traj.obs["rod_nodes"])))
+    assert np.max(np.abs(np.asarray(traj.obs["body_angles"][:, 0]))) < 1e-3
 
 
 @pytest.mark.slow
