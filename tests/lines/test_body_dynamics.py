@@ -133,7 +133,7 @@ def test_pinned_body_swings_about_the_cart_angle():
     (sampled every 0.01 s until the fourth turning point after 0.3 s) within
     0.001 rad of atan(-a/g) (MoorDyn: 5.2e-5; here 5.2e-5), and the roll within
     2e-5 rad of MoorDyn's at every sample (measured 4.6e-6: MoorDyn's RK2 with
-    a 1 ms step)."""
+    a 1 ms step); the pin force within 30 N of MoorDyn's."""
     a = 0.5
     motion = lines.RigidMotion(
         fn=lambda t, acc: jnp.stack([0 * t, 0.5 * acc * t**2, 0 * t, 0 * t, 0 * t,
@@ -159,6 +159,15 @@ def test_pinned_body_swings_about_the_cart_angle():
     assert np.min(roll) == pytest.approx(2 * theta, abs=2e-4)
     md = MOORDYN["pinned_roll"]
     assert np.max(np.abs(roll[: len(md)] - md)) < 2e-5
+    # the force the pin takes (MoorDyn's getFnet: force less the inertia force,
+    # no moment), after MoorDyn's start-up of the pin acceleration (1 s), within
+    # 30 N of MoorDyn's over a swing of 5e4 N (measured 11 N across, 1.6 N
+    # vertical, of 4.9e5 N)
+    F = np.asarray(traj.obs["body_force"][:, 0])
+    md_f = MOORDYN["pinned_f"]
+    n = len(md_f)
+    assert np.all(F[:, 3:] == 0)
+    np.testing.assert_allclose(F[99:n, :3], md_f[99:], atol=30.0)
 
 
 def test_body_drag_and_output_channels(tmp_path):
@@ -166,8 +175,8 @@ def test_body_drag_and_output_channels(tmp_path):
     all six axes falls at nearly its terminal speed; MoorDyn's test checks only
     that it runs): the body's height and speed within 2e-4 m and 5e-5 m/s of
     MoorDyn's every 0.1 s for 5 s (measured 7e-5 and 2e-5, MoorDyn's RK2 with a
-    2 ms step), its net force (MoorDyn's getFnet) within 2e-2 N after the first
-    second; the BODY1 channels in the .out and .npz files."""
+    2 ms step), its net force (MoorDyn's getFnet) within 5e-3 N after the first
+    second (measured 7e-4 N); the BODY1 channels in the .out and .npz files."""
     tint = MOORDYN["drag_t"]
     scene = lines.read_moordyn(_deck("bodyDrag.txt"), static=False,
                                t1=float(tint[-1]))  # fmt: skip
@@ -184,7 +193,7 @@ def test_body_drag_and_output_channels(tmp_path):
     np.testing.assert_allclose(ang, MOORDYN["drag_r"][:, 3:], atol=1e-12)
     F = np.asarray(obs["body_force"][:, 0])
     late = tint >= 1.0
-    np.testing.assert_allclose(F[late], MOORDYN["drag_f"][late], atol=2e-2)
+    np.testing.assert_allclose(F[late], MOORDYN["drag_f"][late], atol=5e-3)
     out, npz = lines.write_outputs(traj, scene, tmp_path / "drag")
     with open(out) as f:
         names = f.readline().rstrip("\n").split("\t")
