@@ -578,9 +578,9 @@ class LineNetwork(AbstractModel):
                     f"FreePoint or BodyPoint; got {p!r}."
                 )
             if isinstance(p, BodyPoint) and not p.body < nb:
+                valid = f"0..{nb - 1}" if nb else "none: `bodies` is empty"
                 raise ValueError(
-                    f"`points[{i}].body` must be a body index in 0..{nb - 1}; got "
-                    f"{p.body}."
+                    f"`points[{i}].body` must be a body index ({valid}); got {p.body}."
                 )
         if not isinstance(self.rods, tuple) or not all(
             isinstance(r, Rod) for r in self.rods
@@ -609,8 +609,9 @@ class LineNetwork(AbstractModel):
             )
         for j, r in enumerate(self.rods):
             if r.body is not None and not r.body < nb:
+                valid = f"0..{nb - 1}" if nb else "none: `bodies` is empty"
                 raise ValueError(
-                    f"`rods[{j}].body` must be a body index in 0..{nb - 1}; got "
+                    f"`rods[{j}].body` must be None or a body index ({valid}); got "
                     f"{r.body}."
                 )
             if r.segments == 0:

@@ -33,6 +33,7 @@ import jaxstring as js
 from jaxstring import lines
 from jaxstring._fit import SolveConfig, solve
 from jaxstring.chain import PrescribedEnd
+from jaxstring.lines import models
 
 
 G = 9.80665
@@ -252,3 +253,59 @@ def test_body_mass_gradient_matches_central_differences():
     fd = (float(z(jnp.asarray(m0 + h))) - float(z(jnp.asarray(m0 - h)))) / (2 * h)
     assert dz < 0  # heavier: falls further
     assert abs(dz - fd) <= 1e-5 * abs(fd)
+
+
+def _network(points, bodies=(), body_motions=()):
+    z = jnp.zeros(0)
+    return lines.LineNetwork(
+        points=points, attach=(), segments=(), L=z, d=z, w=z, EA=z, BA=z, Cd=z,
+        Ca=z, CdAx=z, CaAx=z, bodies=bodies, body_motions=body_motions,
+    )  # fmt: skip
+
+
+def test_body_bad_input():
+    """Bad bodies, points on bodies and body motions raise ValueErrors that
+    name the argument, the value and the valid range."""
+    body = lines.Body("free", [0.0, 0, 0], mass=1.0)
+    with pytest.raises(ValueError, match=r"`body` must be an integer >= 0; got -1"):
+        lines.BodyPoint(-1, jnp.zeros(3))
+    with pytest.raises(ValueError, match="`position`"):
+        lines.BodyPoint(0, jnp.zeros(2))
+    with pytest.raises(ValueError, match="`mass`"):
+        lines.BodyPoint(0, jnp.zeros(3), mass=-1.0)
+    with pytest.raises(ValueError, match=r"`points\[0\].body` .*\(0\.\.0\); got 1"):
+        _network((lines.BodyPoint(1, jnp.zeros(3)),), (body,))
+    with pytest.raises(ValueError, match="`bodies` is empty"):
+        _network((lines.BodyPoint(0, jnp.zeros(3)),))
+    with pytest.raises(ValueError, match="`bodies` must be a tuple of Bodies"):
+        _network((), ("body",))
+    motion = lines.RigidMotion([0.0, 1.0], np.zeros((2, 6)))
+    with pytest.raises(ValueError, match=r"one entry per body \(1\); got 2"):
+        _network((), (body,), (None, None))
+    with pytest.raises(ValueError, match="of a coupled or pinned body; .* 'free'"):
+        _network((), (body,), (motion,))
+    deck = _deck("rotatingBody.txt")
+    with pytest.raises(ValueError, match="`motion` key 'ship1' is not valid"):
+        lines.read_moordyn(deck, motion={"ship1": motion}, static=False)
+    with pytest.raises(ValueError, match=r"not coupled .*\('point', 9\)"):
+        lines.read_moordyn(deck, motion={"body1": motion}, static=False)
+
+
+def test_no_body_code_without_bodies(monkeypatch):
+    """A deck without bodies traces none of the body code: its vector field and
+    observables never call the body loads or observables."""
+    scene = lines.read_moordyn(lines.case_path("pendulum.txt"), static=False)
+    assert scene.model.bodies == () and scene.model.body_motions == ()
+
+    def boom(*args, **kw):
+        raise AssertionError("body code traced")
+
+    monkeypatch.setattr(models.LineNetwork, "_body_loads", boom)
+    monkeypatch.setattr(models.LineNetwork, "_body_observables", boom)
+    monkeypatch.setattr(models.LineNetwork, "_frame_sets", boom)
+    model = scene.model
+    jax.make_jaxpr(lambda y: model.vector_field(0.0, y, scene.effects,
+                                                scene.env))(scene.y0)  # fmt: skip
+    obs = jax.eval_shape(lambda y: model.observables(0.0, y, scene.effects,
+                                                     scene.env), scene.y0)  # fmt: skip
+    assert not any(k.startswith("body_") for k in obs)
