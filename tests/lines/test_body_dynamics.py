@@ -16,6 +16,9 @@ the same decks, and against rigid-body mechanics:
   MoorDyn's (RK2, dtM 2 ms);
 - bodies and rods: a free body carrying a fixed and a pinned rod, moored by
   three lines and a buoyed cable, sinks as MoorDyn's does (slow);
+- a coupled body turning at a constant rate: its point carries the line's end,
+  and its net force is the line's pull less the inertia of the line's end
+  node, with the moment of it about the reference point;
 - the sensitivity of a body's response to its mass by forward-mode autodiff
   through the integration agrees with central differences.
 """
@@ -32,7 +35,7 @@ import pytest
 import jaxstring as js
 from jaxstring import lines
 from jaxstring._fit import SolveConfig, solve
-from jaxstring.chain import PrescribedEnd
+from jaxstring.chain import FixedEnd, PrescribedEnd
 from jaxstring.lines import models
 
 
@@ -253,6 +256,47 @@ def test_body_mass_gradient_matches_central_differences():
     fd = (float(z(jnp.asarray(m0 + h))) - float(z(jnp.asarray(m0 - h)))) / (2 * h)
     assert dz < 0  # heavier: falls further
     assert abs(dz - fd) <= 1e-5 * abs(fd)
+
+
+def test_coupled_body_force_is_the_line_pull_less_inertia():
+    """A coupled body turning about z at 0.2 rad/s about its reference point
+    (1, 2, -3) with a point 10 m out, a line (2 segments, EA 1e4 N, 1 kg/m)
+    from it to an anchor, no gravity, drag or added mass: the line's end node
+    is at the point, the body's angles are (0, 0, 0.2 t) and its net force is
+    T u + m_end omega^2 r (the pull of the first segment, less the inertia of
+    the end node's w L / 4 in its circle), with the moment r x F (MoorDyn's
+    getFnet of a coupled body)."""
+    w_rate, EA, L, w = 0.2, 1e4, 15.0, 1.0
+    motion = lines.RigidMotion(
+        fn=lambda t, om: jnp.stack([0 * t, 0 * t, 0 * t, 0 * t, 0 * t, om * t]),
+        params=jnp.asarray(w_rate),
+    )
+    one = lambda v: jnp.array([v])  # noqa: E731
+    model = lines.LineNetwork(
+        points=(lines.BodyPoint(0, jnp.array([10.0, 0, 0])),
+                FixedEnd(jnp.array([31.0, 2.0, -3.0]))),
+        attach=((0, 1),), segments=(2,), L=one(L), d=one(0.1), w=one(w),
+        EA=one(EA), BA=one(0.0), Cd=one(0.0), Ca=one(0.0), CdAx=one(0.0),
+        CaAx=one(0.0), bodies=(lines.Body("coupled", [1.0, 2.0, -3.0]),),
+        body_motions=(motion,),
+    )  # fmt: skip
+    t = 1.3
+    r = 10.0 * np.array([math.cos(w_rate * t), math.sin(w_rate * t), 0.0])
+    P = np.array([1.0, 2.0, -3.0]) + r
+    mid = np.array([31.0, 2.0, -3.0]) + 0.4 * (P - np.array([31.0, 2.0, -3.0]))
+    y = jnp.zeros(model.state_shape()).at[0, :3].set(jnp.asarray(mid))
+    obs = model.observables(t, y, (), js.Environment(g=0.0))
+    np.testing.assert_allclose(np.asarray(obs["nodes"][0]), P, rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(obs["body_angles"][0]),
+                               [0, 0, w_rate * t], atol=1e-14)  # fmt: skip
+    np.testing.assert_allclose(np.asarray(obs["body_omega"][0]), [0, 0, w_rate],
+                               atol=1e-14)  # fmt: skip
+    seg = np.linalg.norm(mid - P)
+    T = EA * (seg - L / 2) / (L / 2)
+    F = T * (mid - P) / seg + (w * L / 4) * w_rate**2 * r
+    F6 = np.asarray(obs["body_force"][0])
+    np.testing.assert_allclose(F6[:3], F, rtol=1e-12)
+    np.testing.assert_allclose(F6[3:], np.cross(r, F), rtol=1e-12)
 
 
 def _network(points, bodies=(), body_motions=()):
