@@ -19,6 +19,8 @@ the same decks, and against rigid-body mechanics:
 - a coupled body turning at a constant rate: its point carries the line's end,
   and its net force is the line's pull less the inertia of the line's end
   node, with the moment of it about the reference point;
+- a free body spinning about an axis that is not principal keeps its angular
+  momentum and kinetic energy (the gyroscopic terms MoorDyn leaves out);
 - the sensitivity of a body's response to its mass by forward-mode autodiff
   through the integration agrees with central differences.
 """
@@ -297,6 +299,43 @@ def test_coupled_body_force_is_the_line_pull_less_inertia():
     F6 = np.asarray(obs["body_force"][0])
     np.testing.assert_allclose(F6[:3], F, rtol=1e-12)
     np.testing.assert_allclose(F6[3:], np.cross(r, F), rtol=1e-12)
+
+
+def test_spinning_body_keeps_its_angular_momentum():
+    """A free body in vacuum (inertia (2, 5, 9) kg m^2 about a centre of gravity
+    off its reference point, turned by (0.3, -0.2, 0.5) rad), spinning about an
+    axis that is not principal, its centre of gravity at rest: over 5 s its
+    angular momentum R I R^T omega and kinetic energy stay within 1e-8
+    relative, its centre of gravity within 1e-9 m of where it was."""
+    cg = np.array([0.5, -0.2, 0.1])
+    body = lines.Body("free", [1.0, 2.0, -3.0], [0.3, -0.2, 0.5], mass=4.0,
+                      cg=cg, inertia=[2.0, 5.0, 9.0])  # fmt: skip
+    model = _network((), (body,))
+    fr = model.topology.frames
+    y0 = model.initial_rigid_rows(jnp.zeros(model.state_shape()))
+    omega = np.array([0.4, 1.0, -0.7])
+    R0 = np.asarray(lines.rotation_matrix(jnp.array([0.3, -0.2, 0.5])))
+    c0 = np.array([1.0, 2.0, -3.0]) + R0 @ cg
+    v0 = -np.cross(omega, R0 @ cg)  # the centre of gravity at rest
+    y0 = y0.at[fr.trans_row[1], 3:].set(jnp.asarray(v0))
+    y0 = y0.at[fr.rot_rows[1][0], 3:].set(jnp.asarray(omega))
+    scene = js.Scene(model, (), y0, t1=5.0, env=js.Environment(g=0.0))
+    ts = np.linspace(0.0, 5.0, 11)
+    traj = js.simulate(scene, "tsit5", rtol=1e-11, atol=1e-11, ts=ts)
+    assert traj.ok
+    R = np.asarray(traj.obs["body_rotation"][:, 0])
+    w = np.asarray(traj.obs["body_omega"][:, 0])
+    p = np.asarray(traj.obs["body_position"][:, 0])
+    Iw = np.einsum("tij,j,tkj,tk->ti", R, [2.0, 5.0, 9.0], R, w)
+    H = Iw  # about the centre of gravity, which is at rest
+    E = 0.5 * np.einsum("ti,ti->t", w, Iw)
+    np.testing.assert_allclose(
+        H, np.broadcast_to(H[0], H.shape), rtol=0, atol=1e-8 * np.linalg.norm(H[0])
+    )
+    np.testing.assert_allclose(E, E[0], rtol=1e-8)
+    c = p + np.einsum("tij,j->ti", R, cg)
+    np.testing.assert_allclose(c, np.broadcast_to(c0, c.shape), atol=1e-9)
+    assert np.max(np.abs(w - omega)) > 0.1  # it does precess
 
 
 def _network(points, bodies=(), body_motions=()):
