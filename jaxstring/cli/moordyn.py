@@ -45,6 +45,15 @@ def add_parser(scene_parsers, common_arguments, cache_arguments) -> None:
         "or 'diameter' (d, DNV's and OrcaFlex's chain convention)",
     )
     p.add_argument(
+        "--free-points",
+        dest="free_points",
+        choices=("hold", "solve"),
+        default="hold",
+        help="the static equilibrium: free points held at their deck positions "
+        "('hold', default) or settled with the lines ('solve'; e.g. the free end of "
+        "MoorDyn's cantilevered beam)",
+    )
+    p.add_argument(
         "--dt-out", dest="dt_out", type=float, default=0.1, help="output step, s"
     )
     common_arguments(p, "kvaerno5")
@@ -75,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
             motion = (times, lines.ramp_in(times, offsets, args.ramp))
         start = time.perf_counter()
         scene = lines.read_moordyn(args.deck, motion=motion, t1=args.t1, t0=args.t0,
-                                   axial_drag=args.axial_drag)  # fmt: skip
+                                   axial_drag=args.axial_drag,
+                                   free_points=args.free_points)  # fmt: skip
         setup_s = time.perf_counter() - start
         os.makedirs(args.out, exist_ok=True)
     except (ValueError, OSError) as e:

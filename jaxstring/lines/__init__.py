@@ -1,11 +1,13 @@
 """Mooring-line networks (MoorDyn's lumped-mass model): lines of lumped masses
-between fixed, prescribed and free points; weight, buoyancy and Morison drag in a
-current (the chain loads of `jaxstring.chain`), added mass, seabed contact with
-smooth friction; time-varying unstretched lengths; MoorDyn v2 decks in and
-MoorDyn-style output channels out.
+between fixed, prescribed and free points, with bending stiffness and rods;
+weight, buoyancy and Morison drag in a current (the chain loads of
+`jaxstring.chain`), added mass, seabed contact with smooth friction;
+time-varying unstretched lengths; MoorDyn v2 decks in and MoorDyn-style output
+channels out.
 
-Model and points in `models`, seabed contact in `effects`, decks and outputs in
-`moordyn`.
+Model and points in `models`, bending stiffness in `bending`, rods in `rods`,
+rigid frames, prescribed motions and their equations of motion in `rigid`, seabed
+contact in `effects`, decks and outputs in `moordyn`.
 """
 
 from ..chain import (
@@ -27,6 +29,7 @@ from .bodies import (
 )
 from .effects import Seabed as Seabed
 from .models import (
+    BodyPoint as BodyPoint,
     FreePoint as FreePoint,
     LineNetwork as LineNetwork,
     equilibrium as equilibrium,
@@ -44,6 +47,8 @@ from .moordyn import (
     static_tensions as static_tensions,
     write_outputs as write_outputs,
 )
+from .rigid import RigidMotion as RigidMotion
+from .rods import Rod as Rod, RodEnd as RodEnd
 from .statics import (
     MooringEquilibrium as MooringEquilibrium,
     MooringLoads as MooringLoads,
@@ -61,8 +66,12 @@ __all__ = [
     "Gravity",
     "MotionEnd",
     "Seabed",
+    "BodyPoint",
     "FreePoint",
     "LineNetwork",
+    "RigidMotion",
+    "Rod",
+    "RodEnd",
     "equilibrium",
     "initial_shape",
     "MoorDynDeck",

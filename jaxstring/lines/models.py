@@ -55,12 +55,34 @@ from ..chain import (
     AbstractEnd,
     Buoyancy,
     ChainKinematics,
+    Drag,
     Gravity,
     PiecewiseLinear,
     links,
     unit,
 )
+from .bending import bending_forces
+from .bodies import (
+    Body,
+    euler_angles,
+    matrix_to_quat,
+    quat_to_matrix,
+    rotation_matrix,
+)
 from .effects import Seabed
+from .rigid import (
+    Frame,
+    PointSet,
+    RigidMotion,
+    Rotational,
+    group_accelerations,
+    quat_rate,
+)
+from .rods import Rod, RodEnd, rod_loads
+
+
+def _none_or_f64(x):
+    return None if x is None else jnp.asarray(x, jnp.float64)
 
 
 class FreePoint(eqx.Module):
@@ -86,14 +108,85 @@ class FreePoint(eqx.Module):
         check_nonnegative("Ca", self.Ca)
 
 
+class BodyPoint(eqx.Module):
+    """A point fixed on a body (MoorDyn's `Body<n>` point): it moves with the
+    body, and its own loads and the lines on it load the body.
+
+    **Arguments:** `body` (index in `LineNetwork.bodies`, structure), `position`
+    (in the body's frame, relative to its reference point, `(3,)`, m), `mass`
+    (kg), `volume` (m^3), `CdA` (m^2), `Ca` (added mass on rho V), all >= 0.
+    """
+
+    body: int = eqx.field(static=True)
+    position: Float[Array, "3"] = _param()
+    mass: Float[Array, ""] = _param(default=0.0)
+    volume: Float[Array, ""] = _param(default=0.0)
+    CdA: Float[Array, ""] = _param(default=0.0)
+    Ca: Float[Array, ""] = _param(default=0.0)
+
+    def __check_init__(self):
+        if (
+            isinstance(self.body, bool)
+            or not isinstance(self.body, int)
+            or (self.body < 0)
+        ):
+            raise ValueError(f"`body` must be an integer >= 0; got {self.body!r}.")
+        check_shape("position", self.position, (3,), "m")
+        check_finite("position", self.position)
+        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
+            check_shape(name, getattr(self, name), (), u)
+            check_nonnegative(name, getattr(self, name), u)
+        check_nonnegative("Ca", self.Ca)
+
+
 _LINE_PARAMS = ("L", "d", "w", "EA", "BA", "Cd", "Ca", "CdAx", "CaAx")
 
 
+class _Bending(eqx.Module):
+    """Static index arrays of the bending joints (see `bending.bending_forces`)."""
+
+    inner_node: np.ndarray  # interior line node
+    inner_prev: np.ndarray  # its segment on the A side
+    inner_next: np.ndarray  # its segment on the B side
+    clamp_a_node: np.ndarray  # end-A node of a line clamped to a rod end
+    clamp_a_seg: np.ndarray  # its end segment
+    clamp_a_rod: np.ndarray  # the rod
+    clamp_a_sign: np.ndarray  # +1: the rod's axis points into the line
+    clamp_b_node: np.ndarray
+    clamp_b_seg: np.ndarray
+    clamp_b_rod: np.ndarray
+    clamp_b_sign: np.ndarray  # +1: the rod's axis points out of the line
+
+
+class _Frames(eqx.Module):
+    """Static description of the rigid frames: frame 0 is the earth, then one per
+    body, then one per rod that is not fixed (a fixed rod moves with the earth's
+    or its body's frame)."""
+
+    owner: tuple  # per frame: ("earth", None) | ("body", b) | ("rod", r)
+    trans: tuple  # per frame: "fixed" | "state" | "pin" | "motion"
+    rot: tuple  # per frame: "fixed" | "state" | "motion"
+    parent: tuple  # per frame: the frame its origin is pinned to, or None
+    trans_row: tuple  # per frame: its state row (position, velocity) or None
+    rot_rows: tuple  # per frame: its two state rows (quaternion, omega) or None
+    groups: tuple  # per group: its frames, the root first
+    dofs: tuple  # per group, per frame: (translation slice, rotation slice)
+    rod_frame: tuple  # per rod: the frame it moves with
+
+    def has_dof(self, f) -> bool:
+        return self.trans[f] == "state" or self.rot[f] == "state"
+
+
 class _Topology(eqx.Module):
-    """Static index arrays of a network (NumPy, built at trace time)."""
+    """Static index arrays of a network (NumPy, built at trace time).
+
+    Every line node sits on a "body" (a slot): a three-degree-of-freedom state
+    row (interior nodes and free points, in `tri_rows` order), a held point, or a
+    point of a rigid frame (rod ends, points on bodies), in that order."""
 
     n_state: int
-    body: np.ndarray  # line node -> body (state rows, then held points)
+    tri_rows: np.ndarray  # slot j < n_tri -> its state row
+    body: np.ndarray  # line node -> slot
     node_line: np.ndarray  # line node -> line
     prev: np.ndarray  # line node -> previous line node (itself at end A)
     next: np.ndarray  # line node -> next line node (itself at end B)
@@ -101,42 +194,215 @@ class _Topology(eqx.Module):
     seg_line: np.ndarray
     end_a: np.ndarray  # line -> its line node at end A
     end_b: np.ndarray
-    free_rows: np.ndarray  # free point (in `free` order) -> state row
+    free_rows: np.ndarray  # free point (in `free` order) -> slot
     free: tuple  # indices of the free points in `points`
     held: tuple  # indices of the held points in `points`
-    point_body: np.ndarray  # point -> body
+    on_body: tuple  # indices of the points on bodies in `points`
+    point_body: np.ndarray  # point -> slot
+    rod_body: np.ndarray  # (rod, end A/B) -> slot, (R, 2)
+    slot_frame: np.ndarray  # rigid slot (from n_tri + H) -> frame
+    bending: _Bending
+    frames: _Frames
+    group_rows: tuple  # per group: its state rows
+
+    @property
+    def n_tri(self) -> int:
+        return self.tri_rows.shape[0]
+
+    @property
+    def n_bodies(self) -> int:
+        return self.n_tri + len(self.held) + self.slot_frame.shape[0]
+
+    @property
+    def rigid_start(self) -> int:
+        return self.n_tri + len(self.held)
 
 
-def _topology(points, attach, segments) -> _Topology:
+def _frames_of(rods, bodies):
+    """Frames (without rows) of the bodies and rods: see `_Frames`."""
+    owner, trans, rot, parent = [("earth", None)], ["fixed"], ["fixed"], [None]
+    for b, body in enumerate(bodies):
+        owner.append(("body", b))
+        trans.append({"fixed": "fixed", "free": "state", "coupled": "motion",
+                      "pinned": "motion"}[body.kind])  # fmt: skip
+        rot.append({"fixed": "fixed", "free": "state", "coupled": "motion",
+                    "pinned": "state"}[body.kind])  # fmt: skip
+        parent.append(None)
+    rod_frame = []
+    for r, rod in enumerate(rods):
+        home = 0 if rod.body is None else 1 + rod.body
+        if rod.kind == "fixed":
+            rod_frame.append(home)
+            continue
+        rod_frame.append(len(owner))
+        owner.append(("rod", r))
+        trans.append({"pinned": "pin", "free": "state", "coupled": "motion",
+                      "coupled_pinned": "motion"}[rod.kind])  # fmt: skip
+        rot.append("motion" if rod.kind == "coupled" else "state")
+        parent.append(home if rod.kind == "pinned" else None)
+    return owner, trans, rot, parent, rod_frame
+
+
+def _cuthill_mckee(vertices, adj):
+    """The vertices in Cuthill-McKee order, component by component: breadth
+    first from a pseudo-peripheral vertex, neighbours by increasing degree."""
+    index = {v: i for i, v in enumerate(vertices)}
+
+    def bfs(start, seen):
+        order, levels = [start], {start: 0}
+        seen.add(start)
+        k = 0
+        while k < len(order):
+            u = order[k]
+            k += 1
+            for v in sorted(set(adj[u]) - seen, key=lambda v: (len(adj[v]),
+                            index[v])):  # fmt: skip
+                seen.add(v)
+                levels[v] = levels[u] + 1
+                order.append(v)
+        return order, levels
+
+    out, done = [], set()
+    for v0 in vertices:
+        if v0 in done:
+            continue
+        # a pseudo-peripheral start: the farthest vertex of a breadth-first
+        # search, twice
+        start = v0
+        for _ in range(2):
+            _, levels = bfs(start, set(done))
+            far = max(levels.values())
+            start = min((v for v, lv in levels.items() if lv == far),
+                        key=lambda v: (len(adj[v]), index[v]))  # fmt: skip
+        order, _ = bfs(start, done)
+        out += order
+    return out
+
+
+def _topology(points, attach, segments, rods, bodies) -> _Topology:
     free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
-    held = tuple(i for i, p in enumerate(points) if not isinstance(p, FreePoint))
-    row = {}
-    n = 0
-    interior = []
-    for (a, b), N in zip(attach, segments):
-        if a in free and a not in row:
-            row[a] = n
-            n += 1
-        interior.append(n)
-        n += N - 1
-        if b in free and b not in row:
-            row[b] = n
-            n += 1
+    held = tuple(i for i, p in enumerate(points) if isinstance(p, AbstractEnd))
+    on_body = tuple(i for i, p in enumerate(points) if isinstance(p, BodyPoint))
+    owner, trans, rot, parent, rod_frame = _frames_of(rods, bodies)
+    has_dof = [t == "state" or r == "state" for t, r in zip(trans, rot)]
+    # groups: a frame with degrees of freedom and those pinned to it
+    group_of, groups = {}, []
+    for f in range(len(owner)):
+        if not has_dof[f]:
+            continue
+        p = parent[f]
+        if p is not None and has_dof[p]:
+            group_of[f] = group_of[p]
+            groups[group_of[f]].append(f)
+        else:
+            group_of[f] = len(groups)
+            groups.append(([p] if p is not None else []) + [f])
+
+    def frame_object(f):
+        return ("g", group_of[f]) if f in group_of else None
+
+    # rigid slots: both ends of every rod, then the points on bodies
+    slot_frame = [rod_frame[r] for r in range(len(rods)) for _ in range(2)]
+    slot_frame += [1 + points[i].body for i in on_body]
+
+    def obj(e):
+        if isinstance(e, RodEnd):
+            return frame_object(rod_frame[e.rod])
+        if e in on_body:
+            return frame_object(1 + points[e].body)
+        return ("p", e) if e in free else None
+
+    # State rows in Cuthill-McKee order of the network's graph (vertices: interior
+    # nodes, free points, rigid groups; edges: segments): breadth first from a
+    # peripheral vertex, so that the band stays narrow along chains and the
+    # branches of a hub interleave (band about the number of branches, not the
+    # length of one).
+    vertices, adj = [], {}
+
+    def vertex(v):
+        if v is not None and v not in adj:
+            adj[v] = []
+            vertices.append(v)
+        return v
+
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        chain = [vertex(obj(a))]
+        chain += [vertex(("n", k, i)) for i in range(1, N)]
+        chain.append(vertex(obj(b)))
+        for u, v in zip(chain[:-1], chain[1:]):
+            if u is not None and v is not None and u != v:
+                adj[u].append(v)
+                adj[v].append(u)
     for i in free:
-        if i not in row:
-            row[i] = n
+        vertex(("p", i))
+    for g in range(len(groups)):
+        vertex(("g", g))
+    order = _cuthill_mckee(vertices, adj)
+    rows_of = {}
+    n = 0
+    for o in order:
+        if o[0] in ("p", "n"):
+            rows_of[o] = [n]
             n += 1
+        else:
+            rr = []
+            for f in groups[o[1]]:
+                if trans[f] == "state":
+                    rr.append(("t", f, n))
+                    n += 1
+                if rot[f] == "state":
+                    rr.append(("r", f, n))
+                    n += 2
+            rows_of[o] = rr
+    line_rows = [[rows_of[("n", k, i)][0] for i in range(1, N)]
+                 for k, N in enumerate(segments)]  # fmt: skip
     n_state = n
+    trans_row = [None] * len(owner)
+    rot_rows = [None] * len(owner)
+    for o, rr in rows_of.items():
+        if o[0] == "g":
+            for kind, f, row in rr:
+                if kind == "t":
+                    trans_row[f] = row
+                else:
+                    rot_rows[f] = (row, row + 1)
+    dofs = []
+    for frames in groups:
+        k, d = 0, []
+        for f in frames:
+            t_s = r_s = None
+            if trans[f] == "state":
+                t_s, k = slice(k, k + 3), k + 3
+            if rot[f] == "state":
+                r_s, k = slice(k, k + 3), k + 3
+            d.append((t_s, r_s))
+        dofs.append(tuple(d))
+    # slots: three-degree-of-freedom rows (free points, interior nodes), held
+    # points, rigid slots
+    tri_rows = sorted(
+        [rows_of[("p", i)][0] for i in free] + [r for rr in line_rows for r in rr]
+    )
+    tri_slot = {row: j for j, row in enumerate(tri_rows)}
+    n_tri = len(tri_rows)
     point_body = np.zeros(len(points), int)
     for i in free:
-        point_body[i] = row[i]
+        point_body[i] = tri_slot[rows_of[("p", i)][0]]
     for j, i in enumerate(held):
-        point_body[i] = n_state + j
+        point_body[i] = n_tri + j
+    rod_body = n_tri + len(held) + np.arange(2 * len(rods)).reshape(len(rods), 2)
+    for j, i in enumerate(on_body):
+        point_body[i] = n_tri + len(held) + 2 * len(rods) + j
+
+    def slot(e):
+        if isinstance(e, RodEnd):
+            return rod_body[e.rod, 0 if e.end == "A" else 1]
+        return point_body[e]
+
     body, node_line, prev, nxt, seg_lo, seg_line, end_a, end_b = ([] for _ in range(8))
-    m = 0
+    bend = {k: [] for k in _Bending.__dataclass_fields__}
+    m = s = 0
     for k, ((a, b), N) in enumerate(zip(attach, segments)):
-        rows = [point_body[a]] + [interior[k] + i for i in range(N - 1)]
-        rows.append(point_body[b])
+        rows = [slot(a)] + [tri_slot[r] for r in line_rows[k]] + [slot(b)]
         body += rows
         node_line += [k] * (N + 1)
         prev += [m] + [m + i - 1 for i in range(1, N + 1)]
@@ -145,10 +411,49 @@ def _topology(points, attach, segments) -> _Topology:
         seg_line += [k] * N
         end_a.append(m)
         end_b.append(m + N)
+        bend["inner_node"] += [m + i for i in range(1, N)]
+        bend["inner_prev"] += [s + i - 1 for i in range(1, N)]
+        bend["inner_next"] += [s + i for i in range(1, N)]
+        if isinstance(a, RodEnd):
+            bend["clamp_a_node"].append(m)
+            bend["clamp_a_seg"].append(s)
+            bend["clamp_a_rod"].append(a.rod)
+            bend["clamp_a_sign"].append(1.0 if a.end == "B" else -1.0)
+        if isinstance(b, RodEnd):
+            bend["clamp_b_node"].append(m + N)
+            bend["clamp_b_seg"].append(s + N - 1)
+            bend["clamp_b_rod"].append(b.rod)
+            bend["clamp_b_sign"].append(1.0 if b.end == "A" else -1.0)
         m += N + 1
+        s += N
     arr = lambda x: np.asarray(x, dtype=np.int32)
+    bending = _Bending(
+        **{
+            k: np.asarray(v, float) if k.endswith("sign") else arr(v)
+            for k, v in bend.items()
+        }
+    )
+    frames = _Frames(
+        owner=tuple(owner),
+        trans=tuple(trans),
+        rot=tuple(rot),
+        parent=tuple(parent),
+        trans_row=tuple(trans_row),
+        rot_rows=tuple(rot_rows),
+        groups=tuple(tuple(g) for g in groups),
+        dofs=tuple(dofs),
+        rod_frame=tuple(rod_frame),
+    )
+    # the state rows of each group (a rigid slot stands for all of them)
+    group_rows = []
+    for g in range(len(groups)):
+        rr = rows_of.get(("g", g), [])
+        group_rows.append(
+            tuple(x for kind, _, r0 in rr for x in range(r0, r0 + (kind == "r") + 1))
+        )
     return _Topology(
         n_state=n_state,
+        tri_rows=arr(tri_rows),
         body=arr(body),
         node_line=arr(node_line),
         prev=arr(prev),
@@ -157,10 +462,16 @@ def _topology(points, attach, segments) -> _Topology:
         seg_line=arr(seg_line),
         end_a=arr(end_a),
         end_b=arr(end_b),
-        free_rows=arr([row[i] for i in free]),
+        free_rows=arr([point_body[i] for i in free]),
         free=free,
         held=held,
+        on_body=on_body,
         point_body=arr(point_body),
+        rod_body=arr(rod_body).reshape(len(rods), 2),
+        slot_frame=arr(slot_frame),
+        bending=bending,
+        frames=frames,
+        group_rows=tuple(group_rows),
     )
 
 
@@ -190,6 +501,10 @@ class _State(eqx.Module):
     held_pos: Array
     held_vel: Array
     lengths: Array  # unstretched lengths of the lines (n_lines,)
+    curvature: Array | None  # (M,) bending curvature at the nodes, 1/m
+    frames: list  # rigid.Frame of every rigid frame
+    rods: list  # per rod: (end A, axis, length, frame)
+    rigid_pos: Array  # (K, 3) positions of the rigid slots
 
 
 class LineNetwork(AbstractModel):
@@ -209,6 +524,19 @@ class LineNetwork(AbstractModel):
       (hauling in or paying out; MoorDyn's SetLineUnstretchedLength/Vel).
       Default: all None (L constant).
     - `line_ids`, `point_ids`: labels (structure; default 1, 2, ...).
+    - `EI`: bending stiffness per line, `(n_lines,)`, N m^2 (>= 0; MoorDyn's
+      nodal bending moments, `jaxstring.lines.bending`), or None (default): no
+      bending, and none of it is traced. A line end on a rod end is then clamped
+      to the rod's axis, a line end on a point is a hinge.
+    - `rods`: tuple of `Rod`s (default none); a line end names a rod end as
+      `RodEnd(rod index, "A" | "B")` in `attach`.
+    - `bodies`: tuple of `Body`s (`jaxstring.lines.bodies`; default none):
+      rigid bodies with 6 degrees of freedom ("free"), held ("fixed"), moved by
+      a prescribed motion ("coupled") or with a prescribed reference point and
+      free rotation ("pinned", MoorDyn's CoupledPinned). Points on a body are
+      `BodyPoint`s in `points`; rods on a body name it in `Rod.body`.
+    - `body_motions`: per body, None or the `RigidMotion` of a coupled or pinned
+      body (default: all None, held at their initial pose).
     """
 
     points: tuple
@@ -226,37 +554,92 @@ class LineNetwork(AbstractModel):
     lengths: tuple | None = None
     line_ids: tuple | None = eqx.field(static=True, default=None)
     point_ids: tuple | None = eqx.field(static=True, default=None)
+    EI: Float[Array, " n"] | None = eqx.field(converter=_none_or_f64, default=None)
+    rods: tuple = ()
+    bodies: tuple = ()
+    body_motions: tuple = ()
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (Gravity, Buoyancy, AbstractChainLoad)
 
     def __check_init__(self):
-        if not isinstance(self.points, tuple) or not self.points:
+        if not isinstance(self.points, tuple):
+            raise ValueError(f"`points` must be a tuple; got {self.points!r}.")
+        if not isinstance(self.bodies, tuple) or not all(
+            isinstance(b, Body) for b in self.bodies
+        ):
             raise ValueError(
-                f"`points` must be a non-empty tuple; got {self.points!r}."
+                f"`bodies` must be a tuple of Bodies; got {self.bodies!r}."
             )
+        nb = len(self.bodies)
         for i, p in enumerate(self.points):
-            if not isinstance(p, (AbstractEnd, FreePoint)):
+            if not isinstance(p, (AbstractEnd, FreePoint, BodyPoint)):
                 raise ValueError(
-                    f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd or "
-                    f"FreePoint; got {p!r}."
+                    f"`points[{i}]` must be a FixedEnd, PrescribedEnd, MotionEnd, "
+                    f"FreePoint or BodyPoint; got {p!r}."
+                )
+            if isinstance(p, BodyPoint) and not p.body < nb:
+                valid = f"0..{nb - 1}" if nb else "none: `bodies` is empty"
+                raise ValueError(
+                    f"`points[{i}].body` must be a body index ({valid}); got {p.body}."
+                )
+        if not isinstance(self.rods, tuple) or not all(
+            isinstance(r, Rod) for r in self.rods
+        ):
+            raise ValueError(f"`rods` must be a tuple of Rods; got {self.rods!r}.")
+        if self.body_motions and len(self.body_motions) != nb:
+            raise ValueError(
+                f"`body_motions` must hold one entry per body ({nb}); got "
+                f"{len(self.body_motions)}."
+            )
+        for b, m in enumerate(self.body_motions):
+            if m is not None and (
+                not isinstance(m, RigidMotion)
+                or self.bodies[b].kind not in ("coupled", "pinned")
+            ):
+                raise ValueError(
+                    f"`body_motions[{b}]` must be None or a RigidMotion of a coupled "
+                    f"or pinned body; got {m!r} for a {self.bodies[b].kind!r} body."
                 )
         n = len(self.attach)
-        if n == 0:
+        if n == 0 and not (self.rods or self.bodies):
             raise ValueError("`attach` must name at least one line (a, b).")
         if len(self.segments) != n:
             raise ValueError(
                 f"`segments` must have one entry per line ({n}); got {self.segments!r}."
             )
+        for j, r in enumerate(self.rods):
+            if r.body is not None and not r.body < nb:
+                valid = f"0..{nb - 1}" if nb else "none: `bodies` is empty"
+                raise ValueError(
+                    f"`rods[{j}].body` must be None or a body index ({valid}); got "
+                    f"{r.body}."
+                )
+            if r.segments == 0:
+                raise ValueError(
+                    f"`rods[{j}]`: a zero-length rod (segments = 0) is not simulated; "
+                    "valid: segments >= 1."
+                )
+
+        def valid_end(e):
+            if isinstance(e, RodEnd):
+                return (
+                    isinstance(e.rod, int)
+                    and 0 <= e.rod < len(self.rods)
+                    and e.end in ("A", "B")
+                )
+            return isinstance(e, int) and 0 <= e < len(self.points)
+
         for k, ab in enumerate(self.attach):
             if (
                 not isinstance(ab, tuple)
                 or len(ab) != 2
-                or not all(isinstance(i, int) and 0 <= i < len(self.points) for i in ab)
+                or not all(valid_end(e) for e in ab)
                 or ab[0] == ab[1]
             ):
                 raise ValueError(
-                    f"`attach[{k}]` must be two different point indices in "
-                    f"0..{len(self.points) - 1}; got {ab!r}."
+                    f"`attach[{k}]` must be two different line ends: point indices in "
+                    f"0..{len(self.points) - 1} or RodEnd(rod, 'A' | 'B') with rod in "
+                    f"0..{len(self.rods) - 1}; got {ab!r}."
                 )
             check_int(f"segments[{k}]", self.segments[k], 1)
         for name in _LINE_PARAMS:
@@ -274,6 +657,9 @@ class LineNetwork(AbstractModel):
                     "`lengths` must hold one entry per line: None or a PiecewiseLinear "
                     f"unstretched length (m); got {self.lengths!r}."
                 )
+        if self.EI is not None:
+            check_shape("EI", self.EI, (n,), "N m^2")
+            check_nonnegative("EI", self.EI, "N m^2")
 
     # -- structure
     @property
@@ -282,7 +668,8 @@ class LineNetwork(AbstractModel):
 
     @property
     def topology(self) -> _Topology:
-        return _topology(self.points, self.attach, self.segments)
+        return _topology(self.points, self.attach, self.segments, self.rods,
+                         self.bodies)  # fmt: skip
 
     def state_shape(self):
         return (self.topology.n_state, 6)
@@ -291,16 +678,45 @@ class LineNetwork(AbstractModel):
         return y
 
     def structure(self, effects):
-        """The node band of the state's ordering (lines, then free points), the
-        (r, r') layout, and a Jacobian per implicit stage (the stiff axial forces
-        turn with the lines); BDF keeps its Jacobian across steps (mooring chains
-        move slowly)."""
+        """The node band of the state's ordering (lines, free points and rigid
+        objects placed next to the lines that reach them), the (r, r') layout
+        (where nothing rotates), and a Jacobian per implicit stage (the stiff
+        axial forces turn with the lines); BDF keeps its Jacobian across steps
+        (mooring chains move slowly). Bending couples each node to the nodes two
+        away along its line; a rigid object's rows couple to one another and to
+        the nodes next to the line ends on it."""
         del effects
         top = self.topology
-        lo, hi = top.body[top.seg_lo], top.body[top.seg_lo + 1]
-        both = (lo < top.n_state) & (hi < top.n_state)
-        width = max(1, int(np.max(np.abs(lo - hi)[both], initial=0)))
-        return SolverStructure(bandwidth=width, second_order=3, stage_jacobians=True)
+        n_tri, start = top.n_tri, top.rigid_start
+        frames = top.frames
+        group_of = {f: g for g, fs in enumerate(frames.groups) for f in fs
+                    if frames.has_dof(f)}  # fmt: skip
+
+        def rows(slot):
+            if slot < n_tri:
+                return (int(top.tri_rows[slot]),)
+            if slot < start:
+                return ()
+            g = group_of.get(int(top.slot_frame[slot - start]))
+            return () if g is None else top.group_rows[g]
+
+        groups = [[top.body[top.seg_lo], top.body[top.seg_lo + 1]]]
+        if self.EI is not None:
+            m = top.bending.inner_node
+            groups.append([top.body[m - 1], top.body[m], top.body[m + 1]])
+        width = 1
+        for group in groups:
+            for j in range(len(group[0])):
+                rr = [r for col in group for r in rows(int(col[j]))]
+                if rr:
+                    width = max(width, max(rr) - min(rr))
+        for rr in top.group_rows:
+            if rr:
+                width = max(width, max(rr) - min(rr))
+        second_order = 0 if frames.groups else 3
+        return SolverStructure(
+            bandwidth=width, second_order=second_order, stage_jacobians=True
+        )
 
     def damping_BA(self):
         """Internal damping BA per line, N s (MoorDyn: -zeta (L/N) sqrt(EA w) for a
@@ -324,21 +740,142 @@ class LineNetwork(AbstractModel):
         return jnp.stack(vals), jnp.stack(rates)
 
     def held_kinematics(self, t):
-        """Positions, velocities, accelerations of the held points, `(H, 3)` each."""
+        """Positions, velocities, accelerations of the held points, `(H, 3)`
+        each."""
         held = [self.points[i].kinematics(t) for i in self.topology.held]
-        if not held:
-            z = jnp.zeros((0, 3))
-            return z, z, z
-        stack = lambda name: jnp.stack([getattr(k, name) for k in held])
-        return stack("position"), stack("velocity"), stack("acceleration")
+        out = []
+        for name in ("position", "velocity", "acceleration"):
+            rows = [getattr(k, name) for k in held]
+            out.append(jnp.stack(rows) if rows else jnp.zeros((0, 3)))
+        return tuple(out)
 
     def _free_params(self):
-        free = [self.points[i] for i in self.topology.free]
-        if not free:
+        return self._point_params(self.topology.free)
+
+    def _point_params(self, which):
+        """Mass, volume, CdA and Ca of the points `which` (indices), `(P,)` each."""
+        pts = [self.points[i] for i in which]
+        if not pts:
             z = jnp.zeros((0,))
             return z, z, z, z
-        stack = lambda name: jnp.stack([getattr(p, name) for p in free])
+        stack = lambda name: jnp.stack([getattr(p, name) for p in pts])
         return stack("mass"), stack("volume"), stack("CdA"), stack("Ca")
+
+    # -- rigid frames
+    def _frame_start(self, f):
+        """Initial origin and orientation of frame f."""
+        kind, i = self.topology.frames.owner[f]
+        if kind == "earth":
+            return jnp.zeros(3), jnp.eye(3)
+        if kind == "body":
+            body = self.bodies[i]
+            return body.position, rotation_matrix(body.rotation)
+        rod = self.rods[i]
+        if rod.body is None:
+            return rod.end_a, jnp.eye(3)
+        p, R = self._frame_start(1 + rod.body)
+        return p + R @ rod.end_a, jnp.eye(3)
+
+    def _rod_local(self, r):
+        """End A and the unit axis of rod r in the coordinates of its frame (its
+        body's or the earth's for a fixed rod, its own for the others)."""
+        rod = self.rods[r]
+        if rod.kind == "fixed":
+            return rod.end_a, rod.axis()
+        if rod.body is None:
+            return jnp.zeros(3), rod.axis()
+        _, R = self._frame_start(1 + rod.body)
+        return jnp.zeros(3), R @ rod.axis()
+
+    def initial_rigid_rows(self, y):
+        """`y` with the rows of the rigid frames at their initial pose, at rest."""
+        frames = self.topology.frames
+        for f in range(len(frames.owner)):
+            p0, R0 = self._frame_start(f)
+            if frames.trans_row[f] is not None:
+                y = y.at[frames.trans_row[f]].set(jnp.concatenate([p0, jnp.zeros(3)]))
+            if frames.rot_rows[f] is not None:
+                r1, r2 = frames.rot_rows[f]
+                q = matrix_to_quat(R0)
+                y = y.at[r1].set(jnp.concatenate([q[1:], jnp.zeros(3)]))
+                y = y.at[r2].set(jnp.zeros(6).at[0].set(q[0]))
+        return y
+
+    def frames(self, t, y):
+        """The kinematics (`rigid.Frame`) of every rigid frame at `(t, y)`; the
+        accelerations are those of the prescribed motions (zero where the state
+        moves the frame)."""
+        top = self.topology
+        fr = top.frames
+        out = []
+        z = jnp.zeros(3)
+        for f in range(len(fr.owner)):
+            p0, R0 = self._frame_start(f)
+            kind, i = fr.owner[f]
+            motion = None
+            if kind == "rod":
+                motion = self.rods[i].motion
+            elif kind == "body" and self.body_motions:
+                motion = self.body_motions[i]
+            if motion is not None:
+                mf = motion.frame(t, p0, R0)
+            else:
+                mf = Frame(p0, R0, z, z, z, z)
+            p, v, a = p0, z, z
+            if fr.trans[f] == "state":
+                row = y[fr.trans_row[f]]
+                p, v = row[:3], row[3:]
+            elif fr.trans[f] == "motion":
+                p, v, a = mf.position, mf.velocity, mf.acceleration
+            elif fr.trans[f] == "pin":
+                P = out[fr.parent[f]]
+                rho = P.rotation @ self.rods[i].end_a
+                p = P.position + rho
+                v = P.velocity + jnp.cross(P.omega, rho)
+                a = (P.acceleration + jnp.cross(P.alpha, rho)
+                     + jnp.cross(P.omega, jnp.cross(P.omega, rho)))  # fmt: skip
+            R, w, al = R0, z, z
+            if fr.rot[f] == "state":
+                r1, r2 = fr.rot_rows[f]
+                q = jnp.concatenate([y[r2, :1], y[r1, :3]])
+                R, w = quat_to_matrix(q), y[r1, 3:]
+            elif fr.rot[f] == "motion":
+                R, w, al = mf.rotation, mf.omega, mf.alpha
+            out.append(Frame(p, R, v, w, a, al))
+        return out
+
+    def _rod_geometry(self, frames):
+        """End A, unit axis, length and frame of every rod, in earth axes."""
+        fr = self.topology.frames
+        out = []
+        for r, rod in enumerate(self.rods):
+            f = fr.rod_frame[r]
+            F = frames[f]
+            local_a, axis0 = self._rod_local(r)
+            a = F.position + F.rotation @ local_a
+            q = F.rotation @ axis0
+            out.append((a, q, rod.length, f))
+        return out
+
+    def _rigid_slots(self, frames, rods):
+        """Positions and velocities of the rigid slots (rod ends, then points on
+        bodies), `(K, 3)`."""
+        pos, vel = [], []
+        for a, q, L, f in rods:
+            F = frames[f]
+            va = F.velocity + jnp.cross(F.omega, a - F.position)
+            pos += [a, a + L * q]
+            vel += [va, va + jnp.cross(F.omega, L * q)]
+        for i in self.topology.on_body:
+            p = self.points[i]
+            F = frames[1 + p.body]
+            rho = F.rotation @ p.position
+            pos.append(F.position + rho)
+            vel.append(F.velocity + jnp.cross(F.omega, rho))
+        if not pos:
+            z = jnp.zeros((0, 3))
+            return z, z
+        return jnp.stack(pos), jnp.stack(vel)
 
     # -- one evaluation
     def _state(self, t, y, effects, env) -> _State:
@@ -350,8 +887,12 @@ class LineNetwork(AbstractModel):
                     f"Seabed); got {type(e).__name__} in `effects`."
                 )
         hp, hv, ha = self.held_kinematics(t)
-        Bp = jnp.concatenate([y[:, :3], hp], axis=0)
-        Bv = jnp.concatenate([y[:, 3:], hv], axis=0)
+        frames = self.frames(t, y) if (self.rods or self.bodies) else []
+        rods = self._rod_geometry(frames)
+        sp, sv = self._rigid_slots(frames, rods)
+        tri = y[top.tri_rows]
+        Bp = jnp.concatenate([tri[:, :3], hp, sp], axis=0)
+        Bv = jnp.concatenate([tri[:, 3:], hv, sv], axis=0)
         R, V = Bp[top.body], Bv[top.body]
         lo, hi = top.seg_lo, top.seg_lo + 1
         sl = top.seg_line
@@ -380,10 +921,25 @@ class LineNetwork(AbstractModel):
         mass = self.w[nl] * length
         volume = area[nl] * sub
         q = unit(R[top.next] - R[top.prev])
-        fm, fv, fcda, fca = self._free_params()
-        free_idx = np.asarray(top.free, np.int32)
-        fp = Bp[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
-        fvel = Bv[top.point_body[free_idx]] if len(top.free) else jnp.zeros((0, 3))
+        curvature = None
+        if self.EI is not None:
+            bend = top.bending
+            if len(bend.clamp_a_node) or len(bend.clamp_b_node):
+                axes = jnp.stack([g[1] for g in rods])
+                t_a = bend.clamp_a_sign[:, None] * axes[bend.clamp_a_rod]
+                t_b = bend.clamp_b_sign[:, None] * axes[bend.clamp_b_rod]
+                # a clamped end node's axis is the rod's (MoorDyn)
+                q = q.at[bend.clamp_a_node].set(t_a).at[bend.clamp_b_node].set(t_b)
+            else:
+                t_a = t_b = jnp.zeros((0, 3))
+            f_bend, curvature = bending_forces(qs, lstr, self.EI[sl], bend, t_a, t_b, M)
+            node_f = node_f + f_bend
+        # the points with loads of their own: free points and points on bodies
+        loaded = top.free + top.on_body
+        fm, fv, fcda, fca = self._point_params(loaded)
+        slots = top.point_body[np.asarray(loaded, np.int32)]
+        fp = Bp[slots] if loaded else jnp.zeros((0, 3))
+        fvel = Bv[slots] if loaded else jnp.zeros((0, 3))
         kin = ChainKinematics(
             positions=R,
             velocities=V,
@@ -412,14 +968,13 @@ class LineNetwork(AbstractModel):
             self.Ca[nl][:, None, None] * (eye - Q) + self.CaAx[nl][:, None, None] * Q
         )
         node_m = mass[:, None, None] * eye + added
-        nB = top.n_state + len(top.held)
+        nB = top.n_bodies
         body_f = jnp.zeros((nB, 3)).at[top.body].add(node_f)
         body_m = jnp.zeros((nB, 3, 3)).at[top.body].add(node_m)
-        if len(top.free):
-            rows = top.free_rows
-            body_f = body_f.at[rows].add(point_f)
+        if loaded:
+            body_f = body_f.at[slots].add(point_f)
             pm = fm + env.rho_water * fv * fca
-            body_m = body_m.at[rows].add(pm[:, None, None] * eye)
+            body_m = body_m.at[slots].add(pm[:, None, None] * eye)
         return _State(
             kin=kin,
             seg_tension=T,
@@ -433,22 +988,154 @@ class LineNetwork(AbstractModel):
             held_pos=hp,
             held_vel=hv,
             lengths=Lt,
+            curvature=curvature,
+            frames=frames,
+            rods=rods,
+            rigid_pos=sp,
         )
 
-    def _accelerations(self, st: _State):
-        n = self.topology.n_state
-        return _solve3(st.body_mass[:n], st.body_force[:n])
+    def _rod_loads(self, st, r, t, effects, env):
+        """MoorDyn's loads on rod r at the state's pose (`rods.rod_loads`)."""
+        loads = {}
+        for e in effects:
+            if isinstance(e, Gravity):
+                loads["gravity"] = e
+            elif isinstance(e, Buoyancy):
+                loads["buoyancy"] = e
+            elif isinstance(e, Drag):
+                loads["drag"] = e
+            elif isinstance(e, Seabed):
+                loads["seabed"] = e
+        a, q, _, f = st.rods[r]
+        F = st.frames[f]
+        va = F.velocity + jnp.cross(F.omega, a - F.position)
+        return rod_loads(self.rods[r], a, q, va, F.omega, t, env, loads)
+
+    def _rates(self, t, y, st: _State, effects, env):
+        """dy/dt, the acceleration of every slot `(n_bodies, 3)`, and the
+        translational and angular accelerations of every rigid frame."""
+        top = self.topology
+        n_tri, start = top.n_tri, top.rigid_start
+        acc = _solve3(st.body_mass[:n_tri], st.body_force[:n_tri])
+        tri = y[top.tri_rows]
+        dy = (
+            jnp.zeros_like(y)
+            .at[top.tri_rows]
+            .set(jnp.concatenate([tri[:, 3:], acc], axis=1))
+        )
+        if not (self.rods or self.bodies):
+            return dy, jnp.concatenate([acc, st.held_acc], axis=0), [], []
+        fr = top.frames
+        frames = list(st.frames)
+        acc_f = [F.acceleration for F in frames]
+        alp_f = [F.alpha for F in frames]
+        for g, members in enumerate(fr.groups):
+            local = {f: k for k, f in enumerate(members)}
+            dofs = fr.dofs[g]
+            parents = [local.get(fr.parent[f]) for f in members]
+            pins = []
+            for f in members:
+                p = fr.parent[f]
+                pins.append(None if p is None else frames[f].position
+                            - frames[p].position)  # fmt: skip
+            sets, rots = [], []
+            for f in members:
+                kind, b = fr.owner[f]
+                if kind == "body" and fr.has_dof(f):
+                    pos, mass, force, inertia, moment = self._body_loads(
+                        b, frames[f], t, effects, env
+                    )
+                    sets.append(PointSet(local[f], pos, mass, force))
+                    rots.append(Rotational(local[f], inertia, moment))
+            for r in range(len(self.rods)):
+                f = fr.rod_frame[r]
+                if f in local and fr.has_dof(f):
+                    ld = self._rod_loads(st, r, t, effects, env)
+                    sets.append(PointSet(local[f], ld.positions, ld.masses, ld.forces))
+                    rots.append(Rotational(local[f], ld.inertia, ld.moment))
+            for f in members:
+                on = np.nonzero(top.slot_frame == f)[0]
+                if len(on) and fr.has_dof(f):
+                    k = start + on
+                    pset = PointSet(
+                        local[f], st.rigid_pos[on], st.body_mass[k], st.body_force[k]
+                    )
+                    sets.append(pset)
+            _, acc_g, alp_g = group_accelerations(
+                [frames[f] for f in members], dofs, parents, pins, sets, rots
+            )
+            for f, k in local.items():
+                acc_f[f], alp_f[f] = acc_g[k], alp_g[k]
+                F = frames[f]
+                if fr.trans[f] == "state":
+                    dy = dy.at[fr.trans_row[f]].set(
+                        jnp.concatenate([F.velocity, acc_g[k]])
+                    )
+                if fr.rot[f] == "state":
+                    r1, r2 = fr.rot_rows[f]
+                    qd = quat_rate(jnp.concatenate([y[r2, :1], y[r1, :3]]), F.omega)
+                    dy = dy.at[r1].set(jnp.concatenate([qd[1:], alp_g[k]]))
+                    dy = dy.at[r2, 0].set(qd[0])
+        # accelerations of the rigid slots
+        pos = st.rigid_pos
+        slot_acc = [jnp.zeros((0, 3))]
+        for s in range(top.slot_frame.shape[0]):
+            f = int(top.slot_frame[s])
+            F = frames[f]
+            rho = pos[s] - F.position
+            a = acc_f[f] + jnp.cross(alp_f[f], rho)
+            slot_acc.append((a + jnp.cross(F.omega, jnp.cross(F.omega, rho)))[None])
+        body_acc = jnp.concatenate([acc, st.held_acc] + slot_acc, axis=0)
+        return dy, body_acc, acc_f, alp_f
+
+    def _body_loads(self, b, F, t, effects, env):
+        """Body b's own mass and loads (MoorDyn's Body): its mass at its centre of
+        gravity with its weight and its buoyancy rho V g (MoorDyn puts the
+        buoyancy there too: the deck has no centre of buoyancy), its added mass
+        rho V R diag(Ca) R^T and translational drag 1/2 rho R diag(CdA) R^T |u| u
+        at the reference point, and its rotational inertia R diag(I) R^T about
+        the centre of gravity with the rotational drag -1/2 rho R diag(CdA_rot)
+        R^T |omega| omega. Returns positions `(2, 3)`, masses `(2, 3, 3)`,
+        forces `(2, 3)`, the inertia `(3, 3)` and the moment `(3,)`."""
+        body = self.bodies[b]
+        R, p = F.rotation, F.position
+        rho, g = env.rho_water, env.g
+        eye = jnp.eye(3)
+        cg = p + R @ body.cg
+        added = rho * body.volume * (R * body.Ca[None, :]) @ R.T
+        f_cg = jnp.zeros(3)
+        f_ref = jnp.zeros(3)
+        moment = jnp.zeros(3)
+        for e in effects:
+            if isinstance(e, Gravity):
+                f_cg = f_cg.at[2].add(-body.mass * g)
+            elif isinstance(e, Buoyancy):
+                f_cg = f_cg.at[2].add(rho * body.volume * g)
+            elif isinstance(e, Drag):
+                u = -F.velocity
+                if env.current is not None:
+                    u = u + env.current(t, p[None])[0]
+                Ct = (R * body.CdA[None, :3]) @ R.T
+                Cr = (R * body.CdA[None, 3:]) @ R.T
+                f_ref = f_ref + 0.5 * rho * e.scale * safe_norm(u) * (Ct @ u)
+                moment = moment - 0.5 * rho * e.scale * safe_norm(F.omega) * (
+                    Cr @ F.omega
+                )
+        pos = jnp.stack([cg, p])
+        mass = jnp.stack([body.mass * eye, added])
+        force = jnp.stack([f_cg, f_ref])
+        inertia = (R * body.inertia[None, :]) @ R.T
+        return pos, mass, force, inertia, moment
 
     def vector_field(self, t, y, effects, env):
         st = self._state(t, y, effects, env)
-        return jnp.concatenate([y[:, 3:], self._accelerations(st)], axis=1)
+        return self._rates(t, y, st, effects, env)[0]
 
-    def end_forces(self, st: _State, acc):
+    def end_forces(self, st: _State, body_acc):
         """Forces of each line on its end points A and B, `(n_lines, 3)` each, N:
         the end node's segment force and loads less its inertia (it moves with the
-        point)."""
+        point); `body_acc` the accelerations of the slots (`_rates`)."""
         top = self.topology
-        body_acc = jnp.concatenate([acc, st.held_acc], axis=0)
 
         def at(nodes):
             a = body_acc[top.body[nodes]]
@@ -463,33 +1150,45 @@ class LineNetwork(AbstractModel):
         `end_force_b` (`(n_lines, 3)`, N, on the points) and their magnitudes
         `tension_a`, `tension_b` (`(n_lines,)`), `point_force` (net force of the
         lines on each point, `(n_points, 3)`), `lengths` (unstretched, m),
-        `positions` (the free bodies, `(n, 3)`) and `energy` (kinetic + elastic +
-        the potentials of the scene's constant loads, weight and buoyancy, J)."""
+        `positions` (the state rows' first three columns, `(n, 3)`) and `energy`
+        (kinetic + elastic + the potentials of the scene's constant loads, weight
+        and buoyancy, J; without bending, whose nodal forces have no potential,
+        and only for networks without rods). With rods: `rod_end_force` (the
+        lines' force on each rod's ends A and B, `(R, 2, 3)`, N), `rod_end_a`,
+        `rod_axis`, `rod_velocity`, `rod_acceleration` (of end A), `rod_omega`,
+        `rod_alpha` (`(R, 3)`), `rod_force` (`(R, 6)`: force, N, and moment about
+        end A, N m, of everything on the rod; less its inertia for a coupled rod),
+        `rod_end_tension` (`(R, 2)`, N: the magnitude of the lines' end-node
+        forces on ends A and B, MoorDyn's TENA, TENB), `rod_nodes` and
+        `rod_node_force` (every rod node, rod by rod, see `rod_nodes`); with
+        bodies, per body: `body_position`, `body_velocity`,
+        `body_acceleration` (of its reference point, `(B, 3)`),
+        `body_rotation` (`(B, 3, 3)`, body to earth), `body_angles` (MoorDyn's
+        Euler angles, rad), `body_omega`, `body_alpha` (`(B, 3)`) and
+        `body_force` (`(B, 6)`: force, N, and moment about the reference point,
+        N m, MoorDyn's getFnet, see `_body_observables`); with
+        bending stiffness: `curvature` at every line node
+        (`(M,)`, 1/m)."""
         st = self._state(t, y, effects, env)
-        acc = self._accelerations(st)
-        fa, fb = self.end_forces(st, acc)
+        _, body_acc, acc_f, alp_f = self._rates(t, y, st, effects, env)
+        fa, fb = self.end_forces(st, body_acc)
         top = self.topology
         pf = jnp.zeros((len(self.points), 3))
-        pf = pf.at[np.asarray([a for a, _ in self.attach])].add(fa)
-        pf = pf.at[np.asarray([b for _, b in self.attach])].add(fb)
+        rf = jnp.zeros((2 * len(self.rods), 3))
+        for side, f in ((0, fa), (1, fb)):
+            ends = [ab[side] for ab in self.attach]
+            at_point = [k for k, e in enumerate(ends) if not isinstance(e, RodEnd)]
+            at_rod = [k for k, e in enumerate(ends) if isinstance(e, RodEnd)]
+            if at_point:
+                idx = np.asarray([ends[k] for k in at_point])
+                pf = pf.at[idx].add(f[np.asarray(at_point)])
+            if at_rod:
+                idx = np.asarray(
+                    [2 * ends[k].rod + (ends[k].end == "B") for k in at_rod]
+                )
+                rf = rf.at[idx].add(f[np.asarray(at_rod)])
         kin = st.kin
-        v = y[:, 3:]
-        ke = 0.5 * jnp.sum(
-            jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
-        )
-        EAs = self.EA[top.seg_line]
-        elastic = 0.5 * jnp.sum(EAs * st.seg_l * jnp.maximum(st.seg_strain, 0.0) ** 2)
-        # The potential of the constant loads (weight, buoyancy): minus their work,
-        # over the nodes that move (not those on held points) and the free points.
-        pot = jnp.zeros(())
-        inner = np.ones(top.body.shape[0], bool)
-        inner[top.body >= top.n_state] = False
-        for e in effects:
-            if e.constant:
-                f = e.forces(t, kin, env)
-                work = jnp.where(inner, _dot(f.nodes, kin.positions), 0.0)
-                pot = pot - jnp.sum(work) - jnp.sum(_dot(f.points, kin.point_positions))
-        return {
+        out = {
             "nodes": kin.positions,
             "node_velocities": kin.velocities,
             "positions": y[:, :3],
@@ -501,8 +1200,193 @@ class LineNetwork(AbstractModel):
             "tension_b": safe_norm(fb),
             "point_force": pf,
             "lengths": st.lengths,
-            "energy": ke + elastic + pot,
         }
+        if not (self.rods or self.bodies):
+            v = y[:, 3:]
+            ke = 0.5 * jnp.sum(
+                jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
+            )
+            EAs = self.EA[top.seg_line]
+            strain = jnp.maximum(st.seg_strain, 0.0)
+            elastic = 0.5 * jnp.sum(EAs * st.seg_l * strain**2)
+            # The potential of the constant loads (weight, buoyancy): minus their
+            # work, over the nodes that move (not those on held points) and the
+            # free points.
+            pot = jnp.zeros(())
+            inner = np.ones(top.body.shape[0], bool)
+            inner[top.body >= top.n_state] = False
+            for e in effects:
+                if e.constant:
+                    f = e.forces(t, kin, env)
+                    work = jnp.where(inner, _dot(f.nodes, kin.positions), 0.0)
+                    pot = (pot - jnp.sum(work)
+                           - jnp.sum(_dot(f.points, kin.point_positions)))  # fmt: skip
+            out["energy"] = ke + elastic + pot
+        if self.rods:
+            out.update(self._rod_observables(t, st, body_acc, acc_f, alp_f,
+                                             effects, env))  # fmt: skip
+            out["rod_end_force"] = rf.reshape(len(self.rods), 2, 3)
+        if self.bodies:
+            out.update(self._body_observables(t, st, acc_f, alp_f, effects, env))
+        if st.curvature is not None:
+            out["curvature"] = st.curvature
+        return out
+
+    def _rod_observables(self, t, st, body_acc, acc_f, alp_f, effects, env):
+        """Per rod: end A's position, velocity and acceleration, the axis, the
+        angular velocity and acceleration, every node, and the net force and
+        moment about end A of everything on it (its loads and the end nodes of
+        its lines: MoorDyn's F6net), less its inertia for a coupled rod (the
+        force its motion takes: MoorDyn's getFnet)."""
+        top = self.topology
+        ends = [[] for _ in range(2 * len(self.rods))]
+        for k, (a, b) in enumerate(self.attach):
+            for e, node in ((a, top.end_a[k]), (b, top.end_b[k])):
+                if isinstance(e, RodEnd):
+                    ends[2 * e.rod + (e.end == "B")].append(int(node))
+        out = {k: [] for k in ("rod_end_a", "rod_axis", "rod_velocity", "rod_omega",
+                               "rod_acceleration", "rod_alpha", "rod_force",
+                               "rod_nodes", "rod_node_force",
+                               "rod_end_tension")}  # fmt: skip
+        for r, rod in enumerate(self.rods):
+            a, q, L, f = st.rods[r]
+            F = st.frames[f]
+            ld = self._rod_loads(st, r, t, effects, env)
+            pos, force, mass = ld.positions, ld.forces, ld.masses
+            # the lines' end nodes at its ends
+            for side, idx in ((0, ends[2 * r]), (-1, ends[2 * r + 1])):
+                if idx:
+                    nodes = np.asarray(idx)
+                    force = force.at[side].add(jnp.sum(st.node_force[nodes], 0))
+                    mass = mass.at[side].add(jnp.sum(st.node_mass[nodes], 0))
+            rho = pos - a
+            F6 = jnp.concatenate(
+                [jnp.sum(force, 0), jnp.sum(jnp.cross(rho, force), 0) + ld.moment]
+            )
+            w = F.omega
+            rho_f = pos - F.position
+            acc = (acc_f[f] + jnp.cross(alp_f[f], rho_f)
+                   + jnp.cross(w, jnp.cross(w, rho_f)))  # fmt: skip
+            if rod.kind in ("coupled", "coupled_pinned"):
+                inert = jnp.einsum("kij,kj->ki", mass, acc)
+                Fi = jnp.sum(inert, 0)
+                Mi = (jnp.sum(jnp.cross(rho, inert), 0) + ld.inertia @ alp_f[f]
+                      + jnp.cross(w, ld.inertia @ w))  # fmt: skip
+                if rod.kind == "coupled":
+                    F6 = F6 - jnp.concatenate([Fi, Mi])
+                else:
+                    F6 = jnp.concatenate([F6[:3] - Fi, jnp.zeros(3)])
+            out["rod_end_a"].append(a)
+            out["rod_axis"].append(q)
+            out["rod_velocity"].append(F.velocity + jnp.cross(w, a - F.position))
+            out["rod_acceleration"].append(acc[0])
+            out["rod_omega"].append(w)
+            out["rod_alpha"].append(alp_f[f])
+            out["rod_force"].append(F6)
+            out["rod_nodes"].append(pos)
+            out["rod_node_force"].append(force)
+            out["rod_end_tension"].append(jnp.stack([
+                safe_norm(jnp.sum(st.node_force[np.asarray(ix, int)], 0))
+                if ix else jnp.zeros(()) for ix in (ends[2 * r], ends[2 * r + 1])
+            ]))  # fmt: skip
+        stack = {k: jnp.stack(v) for k, v in out.items()
+                 if k not in ("rod_nodes", "rod_node_force")}  # fmt: skip
+        stack["rod_nodes"] = jnp.concatenate(out["rod_nodes"])
+        stack["rod_node_force"] = jnp.concatenate(out["rod_node_force"])
+        del body_acc
+        return stack
+
+    def _frame_sets(self, st, f, t, effects, env):
+        """What moves rigidly with frame f: lumped masses `(positions, masses,
+        forces)` and rotational inertias `(inertia, moment)` (its body's or
+        rod's own, its fixed rods', its points and rod ends with the lines on
+        them)."""
+        top, fr = self.topology, self.topology.frames
+        sets, rots = [], []
+        kind, i = fr.owner[f]
+        if kind == "body":
+            pos, mass, force, inertia, moment = self._body_loads(
+                i, st.frames[f], t, effects, env
+            )
+            sets.append((pos, mass, force))
+            rots.append((inertia, moment))
+        for r in range(len(self.rods)):
+            if fr.rod_frame[r] == f:
+                ld = self._rod_loads(st, r, t, effects, env)
+                sets.append((ld.positions, ld.masses, ld.forces))
+                rots.append((ld.inertia, ld.moment))
+        on = np.nonzero(top.slot_frame == f)[0]
+        if len(on):
+            k = top.rigid_start + on
+            sets.append((st.rigid_pos[on], st.body_mass[k], st.body_force[k]))
+        return sets, rots
+
+    def _body_observables(self, t, st, acc_f, alp_f, effects, env):
+        """Per body: the reference point's position, velocity and acceleration,
+        the rotation (body to earth) and MoorDyn's Euler angles of it, the
+        angular velocity and acceleration, and MoorDyn's net force and moment
+        about the reference point (`getFnet`): of everything on the body (its
+        own loads, its points and rods with the lines on them, the pin forces of
+        rods pinned to it), less its inertia for a coupled body, and less the
+        inertia force with no moment for a pinned body."""
+        fr = self.topology.frames
+        frames = st.frames
+
+        def accel(f, pos):
+            F = frames[f]
+            rho = pos - F.position
+            return (acc_f[f] + jnp.cross(alp_f[f], rho)
+                    + jnp.cross(F.omega, jnp.cross(F.omega, rho)))  # fmt: skip
+
+        out = {k: [] for k in ("body_position", "body_rotation", "body_angles",
+                               "body_velocity", "body_omega", "body_acceleration",
+                               "body_alpha", "body_force")}  # fmt: skip
+        for b, body in enumerate(self.bodies):
+            f = 1 + b
+            F = frames[f]
+            sets, rots = self._frame_sets(st, f, t, effects, env)
+            force, moment = jnp.zeros(3), jnp.zeros(3)
+            f_in, m_in = jnp.zeros(3), jnp.zeros(3)
+            for pos, mass, fk in sets:
+                rho = pos - F.position
+                inert = jnp.einsum("kij,kj->ki", mass, accel(f, pos))
+                force = force + jnp.sum(fk, 0)
+                moment = moment + jnp.sum(jnp.cross(rho, fk), 0)
+                f_in = f_in + jnp.sum(inert, 0)
+                m_in = m_in + jnp.sum(jnp.cross(rho, inert), 0)
+            for inertia, tau in rots:
+                moment = moment + tau
+                m_in = m_in + inertia @ alp_f[f] + jnp.cross(F.omega, inertia @ F.omega)
+            # rods pinned to the body: the force through the pin
+            for c in range(len(fr.owner)):
+                if fr.parent[c] != f:
+                    continue
+                csets, _ = self._frame_sets(st, c, t, effects, env)
+                pin = jnp.zeros(3)
+                for pos, mass, fk in csets:
+                    inert = jnp.einsum("kij,kj->ki", mass, accel(c, pos))
+                    pin = pin + jnp.sum(fk - inert, 0)
+                force = force + pin
+                moment = moment + jnp.cross(frames[c].position - F.position, pin)
+            F6 = jnp.concatenate([force, moment])
+            if body.kind == "coupled":
+                F6 = F6 - jnp.concatenate([f_in, m_in])
+            elif body.kind == "pinned":
+                F6 = jnp.concatenate([force - f_in, jnp.zeros(3)])
+            out["body_position"].append(F.position)
+            out["body_rotation"].append(F.rotation)
+            out["body_angles"].append(euler_angles(F.rotation))
+            out["body_velocity"].append(F.velocity)
+            out["body_omega"].append(F.omega)
+            out["body_acceleration"].append(acc_f[f])
+            out["body_alpha"].append(alp_f[f])
+            out["body_force"].append(F6)
+        return {k: jnp.stack(v) for k, v in out.items()}
+
+    def rod_nodes(self, r: int) -> np.ndarray:
+        """Indices of rod `r`'s nodes (A to B) in the `rod_nodes` observable."""
+        start = sum(rod.segments + 1 for rod in self.rods[:r])
+        return np.arange(start, start + self.rods[r].segments + 1)
 
     def line_nodes(self, k: int) -> np.ndarray:
         """Indices of line `k`'s nodes (A to B) in the `nodes` observable."""
@@ -583,16 +1467,30 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     **Returns:** state `(n, 6)`."""
     env = Environment() if env is None else env
     top = model.topology
-    hp = np.asarray(model.held_kinematics(jnp.asarray(t0, jnp.float64))[0])
+    t0 = jnp.asarray(t0, jnp.float64)
+    hp = np.asarray(model.held_kinematics(t0)[0])
     pos = np.zeros((top.n_state, 3))
+    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
+    ends = np.zeros((0, 3))
+    if model.rods or model.bodies:
+        frames = model.frames(t0, rigid)
+        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
     pts = []
     for i, p in enumerate(model.points):
         if isinstance(p, FreePoint):
             pts.append(np.asarray(p.position))
+        elif isinstance(p, BodyPoint):
+            pts.append(ends[2 * len(model.rods) + top.on_body.index(i)])
         else:
             pts.append(hp[top.held.index(i)])
     for i, r in zip(top.free, top.free_rows):
-        pos[r] = pts[i]
+        pos[top.tri_rows[r]] = pts[i]
+
+    def at(e):
+        if isinstance(e, RodEnd):
+            return ends[2 * e.rod + (e.end == "B")]
+        return pts[e]
+
     bed = [e for e in effects if isinstance(e, Seabed)]
     seabed_z = -float(bed[0].depth) if bed else None
     gravity = any(isinstance(e, Gravity) for e in effects)
@@ -603,19 +1501,21 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
         d = float(model.d[k])
         w = (float(model.w[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
         EA = float(model.EA[k])
-        _, T = _catenary(pts[a], pts[b], float(L[k]), w, N, seabed_z, EA)
+        _, T = _catenary(at(a), at(b), float(L[k]), w, N, seabed_z, EA)
         # the stretched line: the catenary of the length under that tension
         stretched = float(L[k]) * (1.0 + max(T, 0.0) / EA)
-        shape, _ = _catenary(pts[a], pts[b], stretched, w, N, seabed_z, EA)
-        rows = top.body[model.line_nodes(k)[1:-1]]
+        shape, _ = _catenary(at(a), at(b), stretched, w, N, seabed_z, EA)
+        rows = top.tri_rows[top.body[model.line_nodes(k)[1:-1]]]
         pos[rows] = shape[1:-1]
-    return jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    y = jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    return model.initial_rigid_rows(y)
 
 
 def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
     y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
     st = model._state(t0, y, effects, env)
-    f = st.body_force[: model.topology.n_state]
+    top = model.topology
+    f = jnp.zeros_like(x).at[top.tri_rows].set(st.body_force[: top.n_tri])
     return jnp.where(solve_rows[:, None], f, 0.0)
 
 
@@ -738,9 +1638,11 @@ def equilibrium(
     env = Environment() if env is None else env
     effects = tuple(effects)
     top = model.topology
-    solve_rows = np.ones(top.n_state, bool)
+    # the rigid objects are held at their poses
+    solve_rows = np.zeros(top.n_state, bool)
+    solve_rows[top.tri_rows] = True
     if free_points == "hold":
-        solve_rows[top.free_rows] = False
+        solve_rows[top.tri_rows[top.free_rows]] = False
     solve_rows = jnp.asarray(solve_rows)
     if y0 is None:
         y0 = initial_shape(model, effects, env, t0)

@@ -1,13 +1,17 @@
 """MoorDyn v2 input decks in, MoorDyn-style output channels out.
 
-`parse_moordyn(path)` reads the LINE TYPES (or LINE DICTIONARY), POINTS (or POINT /
-CONNECTION / NODE PROPERTIES), LINES (or LINE PROPERTIES) and OPTIONS sections of a
-MoorDyn v2 deck into a `MoorDynDeck`; `read_moordyn(path, ...)` builds the
-`jaxstring.Scene` at static equilibrium (jaxstring's own solve: catenary start and
-pseudo-transient Newton, not MoorDyn's `.ic` snapshot). Anything the model does not
-have -- rods, bodies, wave kinematics, bending stiffness, non-linear stiffness
-tables, unknown options -- raises a ValueError naming the file, the line and the
-column; nothing is skipped silently.
+`parse_moordyn(path)` reads the LINE TYPES (or LINE DICTIONARY), ROD TYPES,
+BODIES, RODS, POINTS (or POINT / CONNECTION / NODE PROPERTIES), LINES (or LINE
+PROPERTIES), OPTIONS and OUTPUTS sections of a MoorDyn v2 deck into a
+`MoorDynDeck`, every column and attachment keyword as MoorDyn 2.7 reads them
+(sections in any order; column headers are not read, only positions);
+`read_moordyn(path, ...)` builds the `jaxstring.Scene` at static equilibrium
+(jaxstring's own solve: catenary start and pseudo-transient Newton, not MoorDyn's
+`.ic` snapshot). Anything malformed or that the model does not have -- wave
+kinematics, bending-moment and non-linear stiffness tables, vortex-induced lift on
+lines with interior nodes, failure criteria, unknown options or attachment
+keywords -- raises a ValueError naming the file, the line, the column and the
+valid range; nothing is skipped silently.
 
 Conventions (MoorDyn's): z up with the still-water surface at z = 0; the seabed at
 z = -WtrDpth; g = 9.80665 m/s^2, water density 1025 kg/m^3, kBot = 3e6 Pa/m,
@@ -20,6 +24,7 @@ channel), end A its anchor end (ANCHTEN).
 import dataclasses
 import math
 import os
+import re
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -28,8 +33,11 @@ import numpy as np
 from .._environment import Environment
 from .._scene import Scene
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
+from .bodies import Body, rotation_matrix
 from .effects import Seabed
-from .models import FreePoint, LineNetwork, equilibrium
+from .models import BodyPoint, FreePoint, LineNetwork, equilibrium
+from .rigid import RigidMotion
+from .rods import Rod, RodEnd
 
 
 MOORDYN_G = 9.80665
@@ -51,7 +59,7 @@ def case_path(name: str) -> str:
             os.path.relpath(os.path.join(d, f), CASES_DIR)
             for d, _, fs in os.walk(CASES_DIR)
             for f in fs
-            if f.endswith(".txt") and f != "LICENSE.txt"
+            if f.endswith((".txt", ".dat")) and f not in ("LICENSE.txt", "README.md")
         )
         raise ValueError(f"unknown case {name!r}; valid: {', '.join(known)}.")
     return path
@@ -59,12 +67,26 @@ def case_path(name: str) -> str:
 
 _TYPE_COLUMNS = ("Name", "Diam", "Mass/m", "EA", "BA/-zeta", "EI", "Cd", "Ca", "CdAx",
                  "CaAx")  # fmt: skip
+_TYPE_EXTRA = ("Cl", "dF", "cF")
+_ROD_TYPE_COLUMNS = ("Name", "Diam", "Mass/m", "Cd", "Ca", "CdEnd", "CaEnd")
+_BODY_COLUMNS = ("ID", "Attachment", "X0", "Y0", "Z0", "r0", "p0", "y0", "Mass", "CG",
+                 "I", "Volume", "CdA", "Ca")  # fmt: skip
+_ROD_COLUMNS = ("ID", "RodType", "Attachment", "Xa", "Ya", "Za", "Xb", "Yb", "Zb",
+                "NumSegs")  # fmt: skip
 _POINT_COLUMNS = ("ID", "Type", "X", "Y", "Z", "Mass", "Volume", "CdA", "Ca")
 _LINE_COLUMNS = ("ID", "LineType", "AttachA", "AttachB", "UnstrLen", "NumSegs")
 
 _SECTIONS = {
     "LINE TYPES": "types",
     "LINE DICTIONARY": "types",
+    "ROD TYPES": "rod_types",
+    "ROD DICTIONARY": "rod_types",
+    "BODIES": "bodies",
+    "BODY LIST": "bodies",
+    "BODY PROPERTIES": "bodies",
+    "RODS": "rods",
+    "ROD LIST": "rods",
+    "ROD PROPERTIES": "rods",
     "POINTS": "points",
     "POINT PROPERTIES": "points",
     "POINT LIST": "points",
@@ -77,28 +99,54 @@ _SECTIONS = {
     "SOLVER OPTIONS": "options",
     "OUTPUTS": "outputs",
 }
-_UNSUPPORTED_SECTIONS = (
-    "ROD TYPES",
-    "ROD DICTIONARY",
-    "RODS",
-    "ROD PROPERTIES",
-    "ROD LIST",
-    "BODIES",
-    "BODY PROPERTIES",
-    "BODY LIST",
-    "FAILURE",
-    "EXTERNAL LOADS",
-    "MOTIONS",
-)
+_TABLES = ("types", "rod_types", "bodies", "rods", "points", "lines")
+_UNSUPPORTED_SECTIONS = ("FAILURE", "EXTERNAL LOADS", "MOTIONS")
 _POINT_KINDS = {
     "fixed": "fixed",
+    "fix": "fixed",
     "anchor": "fixed",
     "vessel": "coupled",
+    "ves": "coupled",
     "coupled": "coupled",
+    "cpld": "coupled",
     "fairlead": "coupled",
     "free": "free",
     "connect": "free",
+    "con": "free",
     "point": "free",
+}
+# Attachment keywords (MoorDyn2.cpp), upper case.
+_BODY_KINDS = {
+    "FIXED": "fixed",
+    "FIX": "fixed",
+    "ANCHOR": "fixed",
+    "FREE": "free",
+    "VESSEL": "coupled",
+    "VES": "coupled",
+    "COUPLED": "coupled",
+    "CPLD": "coupled",
+    "VESSELPINNED": "coupled_pinned",
+    "VESPIN": "coupled_pinned",
+    "CPLDPIN": "coupled_pinned",
+    "COUPLEDPINNED": "coupled_pinned",
+}
+_ROD_KINDS = {
+    "FIXED": "fixed",
+    "FIX": "fixed",
+    "ANCHOR": "fixed",
+    "PINNED": "pinned",
+    "PIN": "pinned",
+    "FREE": "free",
+    "POINT": "free",
+    "CON": "free",
+    "VESSEL": "coupled",
+    "VES": "coupled",
+    "COUPLED": "coupled",
+    "CPLD": "coupled",
+    "VESSELPINNED": "coupled_pinned",
+    "VESPIN": "coupled_pinned",
+    "CPLDPIN": "coupled_pinned",
+    "COUPLEDPINNED": "coupled_pinned",
 }
 
 # Options read into the scene: deck name (lower case) -> key.
@@ -120,26 +168,36 @@ _PHYSICS_OPTIONS = {
 }
 # Options of MoorDyn's own numerics and files: read and reported, not needed.
 _NUMERIC_OPTIONS = {
-    "writelog", "dtm", "cfl", "tscheme", "dtic", "tmaxic", "cdscaleic", "threshic",
-    "icgendynamic", "fileic", "disableouttime", "dtout", "writeunits", "dtwave",
-    "icdfac", "icthresh", "ictmax", "fricdamp_ic", "disableoutput",
+    "writelog", "dtm", "dt", "cfl", "tscheme", "dtic", "tmaxic", "cdscaleic",
+    "threshic", "icgendynamic", "genDynamicIC".lower(), "fileic", "disableouttime",
+    "dtout", "writeunits", "dtwave", "icdfac", "icthresh", "ictmax", "fricdamp_ic",
+    "disableoutput",
 }  # fmt: skip
 # Options whose non-zero value asks for something the model does not have.
-_ZERO_ONLY_OPTIONS = {"waterkin", "currents", "waves", "seafloor", "inertialf",
-                      "inertialf_rampt", "viv"}  # fmt: skip
+_ZERO_ONLY_OPTIONS = {"waterkin", "wavekin", "currents", "waves", "seafloor",
+                      "inertialf", "inertialf_rampt", "viv"}  # fmt: skip
 
 
 @dataclasses.dataclass
 class MoorDynDeck:
     """A parsed MoorDyn v2 deck.
 
-    **Fields:** `path`; `types` (name -> dict of d, w, EA, BA, Cd, Ca, CdAx, CaAx);
-    `points` (list of dicts: id, kind 'fixed' | 'coupled' | 'free', position, mass,
-    volume, CdA, Ca); `lines` (list of dicts: id, type, a, b (point ids), L,
-    segments); `options` (the physics values after MoorDyn's defaults: g, rho,
+    **Fields:** `path`; `types` (line type name -> dict of d, w, EA, BA, EI, Cd,
+    Ca, CdAx, CaAx, Cl); `points` (list of dicts: id, kind 'fixed' | 'coupled' |
+    'free' | 'body', body (the body's ID for kind 'body', else None), position (on
+    a body: in its frame, relative to its reference point), mass, volume, CdA,
+    Ca); `lines` (list of dicts: id, type, a, b, L, segments; an end is a point ID
+    (int) or a rod end `(rod ID, "A" | "B")`); `rod_types` (name -> dict of d, w,
+    Cd, Ca, CdEnd, CaEnd); `bodies` (list of dicts: id, kind 'fixed' | 'free' |
+    'coupled' | 'coupled_pinned', position (m), angles (rad, MoorDyn's Euler
+    angles: R = Rx(roll) Ry(pitch) Rz(yaw)), mass, cg (3,), inertia (3,) about
+    the CG in the body's axes, volume, CdA (6,), Ca (3,)); `rods` (list of dicts:
+    id, type, kind 'fixed' | 'pinned' | 'free' | 'coupled' | 'coupled_pinned',
+    body (ID or None), end_a, end_b (m; in the body's frame on a body), segments,
+    outputs); `options` (the physics values after MoorDyn's defaults: g, rho,
     depth, kBot, cBot, friction, fric_damp, stat_dyn_fric_scale); `numerics` (the
     deck's own numerical options, e.g. dtM, cfl, tScheme, as text); `outputs`
-    (the OUTPUTS section's channel names, reported, not needed).
+    (the OUTPUTS section's channel names).
     """
 
     path: str
@@ -149,6 +207,9 @@ class MoorDynDeck:
     options: dict
     numerics: dict
     outputs: list
+    rod_types: dict = dataclasses.field(default_factory=dict)
+    bodies: list = dataclasses.field(default_factory=list)
+    rods: list = dataclasses.field(default_factory=list)
 
 
 class _Where:
@@ -171,12 +232,16 @@ class _Where:
         )
 
 
-def _number(where, fields, i, name, positive=False, nonnegative=False):
+def _parse_float(text):
+    return float(text.replace("D", "E").replace("d", "e"))
+
+
+def _number(where, fields, i, name, positive=False, nonnegative=False, text=None):
     if i >= len(fields):
         raise where.error(len(fields) - 1, fields, f"missing column {i + 1} ({name})")
-    text = fields[i]
+    text = fields[i] if text is None else text
     try:
-        v = float(text.replace("D", "E").replace("d", "e"))
+        v = _parse_float(text)
     except ValueError:
         raise where.error(
             i, fields, f"column {i + 1} ({name}) must be a number; got {text!r}"
@@ -190,6 +255,23 @@ def _number(where, fields, i, name, positive=False, nonnegative=False):
     return v
 
 
+def _numbers(where, fields, i, name, counts, nonnegative=False):
+    """Column i as 1 or more '|'-separated numbers, their count one of `counts`."""
+    if i >= len(fields):
+        raise where.error(len(fields) - 1, fields, f"missing column {i + 1} ({name})")
+    parts = fields[i].split("|")
+    if len(parts) not in counts:
+        valid = " or ".join(str(c) for c in counts)
+        raise where.error(
+            i,
+            fields,
+            f"column {i + 1} ({name}) must hold {valid} '|'-separated numbers; got "
+            f"{fields[i]!r}",
+        )
+    return [_number(where, fields, i, name, nonnegative=nonnegative, text=p)
+            for p in parts]  # fmt: skip
+
+
 def _integer(where, fields, i, name, minimum):
     v = _number(where, fields, i, name)
     if v != int(v) or v < minimum:
@@ -197,6 +279,15 @@ def _integer(where, fields, i, name, minimum):
             i, fields, f"column {i + 1} ({name}) must be an integer >= {minimum}"
         )
     return int(v)
+
+
+def _decompose(text):
+    """MoorDyn's decomposeString: alternating letter and digit runs, upper case:
+    'Body1Pinned' -> ['BODY', '1', 'PINNED'], or None if it has other characters."""
+    parts = re.findall(r"[A-Za-z]+|\d+", text)
+    if "".join(parts) != text:
+        return None
+    return [p.upper() for p in parts]
 
 
 def _section_of(text):
@@ -228,7 +319,8 @@ def parse_moordyn(path) -> MoorDynDeck:
         raise ValueError(f"`path`: no MoorDyn deck at {path!r}.")
     with open(path, encoding="utf-8", errors="replace") as f:
         text = f.read().splitlines()
-    types, points, lines, outputs = {}, [], [], []
+    rows = {k: [] for k in _TABLES}
+    outputs = []
     raw_options, numerics = {}, {}
     section, skip = None, 0
     seen = set()
@@ -246,15 +338,15 @@ def parse_moordyn(path) -> MoorDynDeck:
                 raise where.error(
                     0,
                     line.split(),
-                    f"section {kind[1]!r} {what} (jaxstring reads LINE TYPES, POINTS, "
-                    "LINES, OPTIONS and OUTPUTS; rods, bodies and wave kinematics are "
-                    "not modelled)",
+                    f"section {kind[1]!r} {what} (jaxstring reads LINE TYPES, ROD "
+                    "TYPES, BODIES, RODS, POINTS, LINES, OPTIONS and OUTPUTS; failure "
+                    "criteria, external loads and wave kinematics are not modelled)",
                 )
             section = _SECTIONS[kind]
             if section in seen and section != "outputs":
                 raise where.error(0, line.split(), f"section {kind!r} appears twice")
             seen.add(section)
-            skip = 2 if section in ("types", "points", "lines") else 0
+            skip = 2 if section in _TABLES else 0
             continue
         if section is None or not line.strip():
             continue
@@ -262,29 +354,33 @@ def parse_moordyn(path) -> MoorDynDeck:
             skip -= 1
             continue
         fields = line.split()
-        if section == "types":
-            _type_row(where, fields, types)
-        elif section == "points":
-            _point_row(where, fields, points)
-        elif section == "lines":
-            lines.append((where, fields))
+        if section in _TABLES:
+            rows[section].append((where, fields))
         elif section == "options":
             _option_row(where, fields, raw_options, numerics)
         elif section == "outputs":
             if line.strip().upper() != "END":
                 outputs.extend(fields)
     where_end = _Where(path, len(text), text[-1] if text else "")
-    for sec, label in (
-        ("types", "LINE TYPES"),
-        ("points", "POINTS"),
-        ("lines", "LINES"),
-    ):
-        if sec not in seen:
-            raise where_end.error(0, [], f"the deck has no {label} section")
+    # MoorDyn's order: line types, rod types, bodies, rods, points, lines.
+    types, rod_types = {}, {}
+    for w, f in rows["types"]:
+        _type_row(w, f, types)
+    for w, f in rows["rod_types"]:
+        _rod_type_row(w, f, rod_types)
+    bodies = [_body_row(w, f, k + 1) for k, (w, f) in enumerate(rows["bodies"])]
+    rods = [_rod_row(w, f, k + 1, rod_types, bodies)
+            for k, (w, f) in enumerate(rows["rods"])]  # fmt: skip
+    points = []
+    for w, f in rows["points"]:
+        _point_row(w, f, points, bodies)
     ids = {p["id"]: p for p in points}
-    parsed = [_line_row(w, f, types, ids) for w, f in lines]
-    if not parsed:
-        raise where_end.error(0, [], "the LINES section lists no line")
+    parsed = [_line_row(w, f, types, ids, rods, bodies) for w, f in rows["lines"]]
+    if not (parsed or rods or bodies):
+        raise where_end.error(
+            0, [], "the deck has no line, rod or body (LINES, RODS, BODIES sections)"
+        )
+    _check_free_bodies(rows["bodies"], bodies, points, rods, parsed)
     options = {
         "g": MOORDYN_G,
         "rho": 1025.0,
@@ -301,11 +397,19 @@ def parse_moordyn(path) -> MoorDynDeck:
             raise where.error(
                 0, fields, "StatDynFricScale other than 1 is not supported"
             )
-    return MoorDynDeck(path, types, points, parsed, options, numerics, outputs)
+    return MoorDynDeck(path, types, points, parsed, options, numerics, outputs,
+                       rod_types, bodies, rods)  # fmt: skip
 
 
 def _type_row(where, fields, types):
     _need_columns(where, fields, _TYPE_COLUMNS, "a line type")
+    if len(fields) not in (10, 11, 13):
+        raise where.error(
+            len(fields) - 1,
+            fields,
+            f"a line type has 10, 11 or 13 columns ({' '.join(_TYPE_COLUMNS)} "
+            f"[Cl [dF cF]]); got {len(fields)}",
+        )
     name = fields[0]
     for i in (3, 4):
         if "|" in fields[i] or not _is_number(fields[i]):
@@ -321,28 +425,169 @@ def _type_row(where, fields, types):
         "EA": _number(where, fields, 3, "EA", positive=True),
         "BA": _number(where, fields, 4, "BA/-zeta"),
     }
-    EI = _number(where, fields, 5, "EI", nonnegative=True)
-    if EI != 0:
-        raise where.error(5, fields, "bending stiffness EI > 0 is not supported")
+    if not _is_number(fields[5]):
+        raise where.error(
+            5,
+            fields,
+            f"column 6 (EI) must be a number >= 0 (N m^2); got {fields[5]!r} "
+            "(bending-moment curves from files are not supported)",
+        )
+    t["EI"] = _number(where, fields, 5, "EI", nonnegative=True)
     for i, key in zip(range(6, 10), ("Cd", "Ca", "CdAx", "CaAx")):
         t[key] = _number(where, fields, i, key, nonnegative=True)
-    for i in range(10, len(fields)):
-        v = fields[i]
-        if not _is_number(v) or float(v) != 0.0:
-            raise where.error(
-                i,
-                fields,
-                f"column {i + 1} ({v!r}): extra line-type properties (lift, VIV, "
-                "visco-elastic) are not supported",
-            )
+    t["Cl"] = 0.0
+    if len(fields) > 10:
+        t["Cl"] = _number(where, fields, 10, "Cl", nonnegative=True)
+        t["Cl_where"] = (where, fields)
+    for i in (11, 12):
+        if i < len(fields):
+            _number(where, fields, i, _TYPE_EXTRA[i - 10])
     if name in types:
         raise where.error(0, fields, f"line type {name!r} is defined twice")
     types[name] = t
 
 
+def _rod_type_row(where, fields, rod_types):
+    _need_columns(where, fields, _ROD_TYPE_COLUMNS, "a rod type")
+    name = fields[0]
+    if name in rod_types:
+        raise where.error(0, fields, f"rod type {name!r} is defined twice")
+    t = {
+        "d": _number(where, fields, 1, "Diam", positive=True),
+        "w": _number(where, fields, 2, "Mass/m", nonnegative=True),
+    }
+    for i, key in zip(range(3, 7), ("Cd", "Ca", "CdEnd", "CaEnd")):
+        t[key] = _number(where, fields, i, key, nonnegative=True)
+    rod_types[name] = t
+
+
+def _sequential_id(where, fields, expected, what):
+    got = _integer(where, fields, 0, "ID", 1)
+    if got != expected:
+        raise where.error(
+            0, fields, f"{what} IDs must run 1, 2, 3, ... in order; expected {expected}"
+        )
+    return got
+
+
+def _body_row(where, fields, expected):
+    _need_columns(where, fields, _BODY_COLUMNS, "a body")
+    bid = _sequential_id(where, fields, expected, "body")
+    key = fields[1].upper()
+    kind = _BODY_KINDS.get(key)
+    if kind is None:
+        raise where.error(
+            1,
+            fields,
+            f"column 2 (Attachment) {fields[1]!r} is not a body attachment; valid: "
+            "Free, Fixed/Anchor, Coupled/Vessel, CoupledPinned/VesselPinned",
+        )
+    pos = [_number(where, fields, i, n) for i, n in zip((2, 3, 4), "XYZ")]
+    angles = [
+        math.radians(_number(where, fields, i, n))
+        for i, n in zip((5, 6, 7), ("r0", "p0", "y0"))
+    ]
+    mass = _number(where, fields, 8, "Mass", nonnegative=True)
+    cg = _numbers(where, fields, 9, "CG", (1, 3))
+    cg = [0.0, 0.0, cg[0]] if len(cg) == 1 else cg
+    inertia = _numbers(where, fields, 10, "I", (1, 3), nonnegative=True)
+    inertia = inertia * 3 if len(inertia) == 1 else inertia
+    volume = _number(where, fields, 11, "Volume", nonnegative=True)
+    c = _numbers(where, fields, 12, "CdA", (1, 2, 3, 6), nonnegative=True)
+    CdA = {1: lambda: c * 6, 2: lambda: [c[0]] * 3 + [c[1]] * 3,
+           3: lambda: c + c, 6: lambda: c}[len(c)]()  # fmt: skip
+    Ca = _numbers(where, fields, 13, "Ca", (1, 3), nonnegative=True)
+    Ca = Ca * 3 if len(Ca) == 1 else Ca
+    return {"id": bid, "kind": kind, "position": pos, "angles": angles,
+            "mass": mass, "cg": cg, "inertia": inertia, "volume": volume,
+            "CdA": CdA, "Ca": Ca, "line": where.lineno}  # fmt: skip
+
+
+def _body_ref(where, fields, i, parts, bodies, what):
+    """The body ID of an attachment 'BODYn...' (checked against BODIES)."""
+    if len(parts) < 2 or not parts[1].isdigit():
+        raise where.error(
+            i, fields, f"column {i + 1} ({what}) {fields[i]!r}: 'Body' needs a number"
+        )
+    n = int(parts[1])
+    if not 1 <= n <= len(bodies):
+        raise where.error(
+            i,
+            fields,
+            f"column {i + 1} ({what}) {fields[i]!r}: body {n} is not in BODIES "
+            f"(valid: 1..{len(bodies)})",
+        )
+    return n
+
+
+def _rod_row(where, fields, expected, rod_types, bodies):
+    _need_columns(where, fields, _ROD_COLUMNS, "a rod", " [RodOutputs]")
+    rid = _sequential_id(where, fields, expected, "rod")
+    if fields[1] not in rod_types:
+        raise where.error(
+            1, fields, f"rod type {fields[1]!r} is not in ROD TYPES ({list(rod_types)})"
+        )
+    parts = _decompose(fields[2]) or []
+    body = None
+    if parts and parts[0] == "BODY":
+        body = _body_ref(where, fields, 2, parts, bodies, "Attachment")
+        rest = parts[2:]
+        if rest in ([], ["PINNED"], ["PIN"]):
+            kind = "fixed" if not rest else "pinned"
+        else:
+            kind = None
+    else:
+        kind = _ROD_KINDS.get(parts[0]) if len(parts) == 1 else None
+    if kind is None:
+        raise where.error(
+            2,
+            fields,
+            f"column 3 (Attachment) {fields[2]!r} is not a rod attachment; valid: "
+            "Fixed/Anchor, Pinned, Free/Point, Coupled/Vessel, CoupledPinned/"
+            "VesselPinned, Body<n>, Body<n>Pinned",
+        )
+    a = [_number(where, fields, i, n) for i, n in zip((3, 4, 5), ("Xa", "Ya", "Za"))]
+    b = [_number(where, fields, i, n) for i, n in zip((6, 7, 8), ("Xb", "Yb", "Zb"))]
+    N = _integer(where, fields, 9, "NumSegs", 0)
+    length = math.dist(a, b)
+    if N > 0 and length == 0:
+        raise where.error(
+            6, fields, "a rod with NumSegs > 0 needs end B away from end A"
+        )
+    if N == 0 and math.hypot(*b) == 0:
+        raise where.error(
+            6, fields, "a zero-length rod (NumSegs 0) needs a direction in Xb Yb Zb"
+        )
+    return {"id": rid, "type": fields[1], "kind": kind, "body": body,
+            "end_a": a, "end_b": b, "segments": N,
+            "outputs": fields[10] if len(fields) > 10 else "-",
+            "line": where.lineno}  # fmt: skip
+
+
+def _check_free_bodies(rows, bodies, points, rods, lines):
+    """A free body must have inertia: its own mass or volume, or points, rods or
+    lines on it that carry mass."""
+    for (where, fields), b in zip(rows, bodies):
+        if b["kind"] not in ("free",) or b["mass"] > 0 or b["volume"] > 0:
+            continue
+        on = [p for p in points if p["body"] == b["id"]]
+        carried = any(p["mass"] > 0 or p["volume"] > 0 for p in on)
+        carried |= any(r["body"] == b["id"] for r in rods)
+        ids = {p["id"] for p in on}
+        carried |= any(ln["a"] in ids or ln["b"] in ids for ln in lines)
+        if not carried:
+            raise where.error(
+                8,
+                fields,
+                "a Free body with zero Mass and zero Volume has no inertia: give "
+                "Mass > 0 (kg) or Volume > 0 (m^3), or attach points, rods or lines "
+                "with mass to it",
+            )
+
+
 def _is_number(text):
     try:
-        float(text)
+        _parse_float(text)
         return True
     except ValueError:
         return False
@@ -358,63 +603,130 @@ def _need_columns(where, fields, columns, what, more=""):
         )
 
 
-def _point_row(where, fields, points):
+def _point_row(where, fields, points, bodies):
     _need_columns(where, fields, _POINT_COLUMNS, "a point")
     pid = _integer(where, fields, 0, "ID", 0)
-    kind = _POINT_KINDS.get(fields[1].lower())
+    parts = _decompose(fields[1]) or [""]
+    body = None
+    if parts[0] == "BODY":
+        body = _body_ref(where, fields, 1, parts, bodies, "Type")
+        if len(parts) > 2:
+            raise where.error(
+                1, fields, f"point type {fields[1]!r}: valid: Body<n> (no suffix)"
+            )
+        kind = "body"
+    else:
+        kind = _POINT_KINDS.get(fields[1].lower())
     if kind is None:
         raise where.error(
             1,
             fields,
-            f"point type {fields[1]!r} is not supported (Fixed/Anchor, Vessel/Coupled/"
-            "Fairlead, Free/Connect; points on bodies are not modelled)",
+            f"point type {fields[1]!r} is not valid (Fixed/Anchor, Vessel/Coupled/"
+            "Fairlead, Free/Connect/Point, Body<n>)",
         )
     if any(p["id"] == pid for p in points):
         raise where.error(0, fields, f"point ID {pid} is defined twice")
     pos = [_number(where, fields, i, n) for i, n in zip((2, 3, 4), "XYZ")]
+    cda, ca = 7, 8
+    if len(fields) >= 12:  # ID Type X Y Z M V FX FY FZ CdA Ca
+        for i, n in zip((7, 8, 9), ("FX", "FY", "FZ")):
+            if _number(where, fields, i, n) != 0:
+                raise where.error(
+                    i, fields, f"column {i + 1} ({n}): constant point forces are "
+                    "not supported (valid: 0)"
+                )  # fmt: skip
+        cda, ca = 10, 11
     points.append(
         {
             "id": pid,
             "kind": kind,
+            "body": body,
             "position": pos,
             "mass": _number(where, fields, 5, "Mass", nonnegative=True),
             "volume": _number(where, fields, 6, "Volume", nonnegative=True),
-            "CdA": _number(where, fields, 7, "CdA", nonnegative=True),
-            "Ca": _number(where, fields, 8, "Ca", nonnegative=True),
+            "CdA": _number(where, fields, cda, "CdA", nonnegative=True),
+            "Ca": _number(where, fields, ca, "Ca", nonnegative=True),
         }
     )
 
 
-def _line_row(where, fields, types, points):
+def _line_end(where, fields, i, name, points, rods):
+    """A line end: a point ID (int) or a rod end (rod ID, 'A' | 'B')."""
+    text = fields[i]
+    parts = _decompose(text) or []
+    named = len(parts) == 2 and parts[0] in ("P", "POINT", "C", "CON")
+    if text.isdigit() or (named and parts[1].isdigit()):
+        pid = int(parts[-1])
+        if pid not in points:
+            raise where.error(i, fields, f"point {pid} is not in POINTS")
+        return pid
+    if len(parts) == 3 and parts[0] in ("R", "ROD") and parts[2] in ("A", "B"):
+        rid = int(parts[1])
+        if not 1 <= rid <= len(rods):
+            raise where.error(
+                i,
+                fields,
+                f"column {i + 1} ({name}) {text!r}: rod {rid} is not in RODS (valid: "
+                f"1..{len(rods)})",
+            )
+        return (rid, parts[2])
+    raise where.error(
+        i,
+        fields,
+        f"column {i + 1} ({name}) {text!r} is not a line end; valid: a point ID "
+        "(n, Pn, POINTn, Cn, CONn) or a rod end (RnA, RnB, RODnA, RODnB)",
+    )
+
+
+def end_position(deck: MoorDynDeck, end) -> np.ndarray:
+    """Global position at the deck's initial pose of a line end (a point ID or a
+    rod end `(rod ID, "A" | "B")`), m."""
+    if isinstance(end, tuple):
+        rod = deck.rods[end[0] - 1]
+        local = np.asarray(rod["end_a"] if end[1] == "A" else rod["end_b"], float)
+        if rod["segments"] == 0 and end[1] == "B":
+            local = np.asarray(rod["end_a"], float)
+        body = rod["body"]
+    else:
+        p = next(p for p in deck.points if p["id"] == end)
+        local, body = np.asarray(p["position"], float), p["body"]
+    if body is None:
+        return local
+    b = deck.bodies[body - 1]
+    R = np.asarray(rotation_matrix(jnp.asarray(b["angles"])))
+    return np.asarray(b["position"]) + R @ local
+
+
+def _line_row(where, fields, types, points, rods, bodies):
     _need_columns(where, fields, _LINE_COLUMNS, "a line", " [LineOutputs]")
     lid = _integer(where, fields, 0, "ID", 0)
     if fields[1] not in types:
         raise where.error(
             1, fields, f"line type {fields[1]!r} is not in LINE TYPES ({list(types)})"
         )
-    ends = []
-    for i, name in ((2, "AttachA"), (3, "AttachB")):
-        text = fields[i]
-        if not text.isdigit():
-            raise where.error(
-                i,
-                fields,
-                f"column {i + 1} ({name}) must be a point ID; {text!r} (rods and "
-                "bodies) is not supported",
-            )
-        if int(text) not in points:
-            raise where.error(i, fields, f"point {text} is not in POINTS")
-        ends.append(int(text))
+    ends = [_line_end(where, fields, i, name, points, rods)
+            for i, name in ((2, "AttachA"), (3, "AttachB"))]  # fmt: skip
     if ends[0] == ends[1]:
-        raise where.error(3, fields, "a line cannot join a point to itself")
+        raise where.error(3, fields, "a line cannot join a line end to itself")
     L = _number(where, fields, 4, "UnstrLen")
     if L == 0:
         raise where.error(4, fields, "column 5 (UnstrLen) must not be 0")
     if L < 0:  # MoorDyn: a factor on the distance between the ends
-        pa = np.asarray(points[ends[0]]["position"])
-        pb = np.asarray(points[ends[1]]["position"])
+        deck = MoorDynDeck("", types, list(points.values()), [], {}, {}, [], {},
+                           bodies, rods)  # fmt: skip
+        pa, pb = (end_position(deck, e) for e in ends)
         L = -L * float(np.linalg.norm(pb - pa))
     N = _integer(where, fields, 5, "NumSegs", 1)
+    Cl = types[fields[1]]["Cl"]
+    if Cl != 0 and N > 1:
+        w, f = types[fields[1]]["Cl_where"]
+        raise w.error(
+            10,
+            f,
+            f"column 11 (Cl = {Cl:g}): vortex-induced lift is not modelled; valid: 0 "
+            f"for a line type of lines with more than one segment (line {lid} has "
+            f"{N})",
+        )
     return {"id": lid, "type": fields[1], "a": ends[0], "b": ends[1], "L": L,
             "segments": N}  # fmt: skip
 
@@ -427,9 +739,9 @@ def _option_row(where, fields, raw, numerics):
     if key in _PHYSICS_OPTIONS:
         v = _number(where, fields, 0, name)
         target = _PHYSICS_OPTIONS[key]
-        if target in ("rho", "g", "fric_damp") and v <= 0:
+        if target == "fric_damp" and v <= 0:
             raise where.error(0, fields, f"option {name} must be > 0; got {v:g}")
-        if target in ("kBot", "cBot", "friction", "depth") and v < 0:
+        if target in ("rho", "g", "kBot", "cBot", "friction", "depth") and v < 0:
             raise where.error(0, fields, f"option {name} must be >= 0; got {v:g}")
         raw[target] = (v, where, fields)
     elif key in _ZERO_ONLY_OPTIONS:
@@ -452,8 +764,10 @@ def _option_row(where, fields, raw, numerics):
 
 
 def read_motion(path, n_coupled=None):
-    """A motion table: whitespace-separated rows `t x y z [rx ry rz]` (s, m, rad;
-    the rotations must be 0). Returns `(times (K,), offsets (K, 3))`."""
+    """A motion table: whitespace-separated rows `t x y z [rx ry rz]` (s, m, rad):
+    the offsets of the coupled objects from their deck poses (MoorDyn's Euler
+    angles for the rotations). Returns `(times (K,), offsets (K, 3) or (K, 6))`."""
+    del n_coupled
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ValueError(f"`motion`: no motion table at {path!r}.")
@@ -464,35 +778,48 @@ def read_motion(path, n_coupled=None):
     if data.shape[1] not in (4, 7):
         raise ValueError(
             f"`motion`: {path} has {data.shape[1]} columns; valid: 4 (t x y z) or 7 "
-            "(t x y z rx ry rz with zero rotations)."
-        )
-    if data.shape[1] == 7 and np.any(data[:, 4:] != 0):
-        raise ValueError(
-            f"`motion`: {path} has non-zero rotations (columns 5-7); only "
-            "translations of the coupled points are supported."
+            "(t x y z rx ry rz)."
         )
     t = data[:, 0]
     if data.shape[0] < 2 or np.any(np.diff(t) <= 0):
         raise ValueError(f"`motion`: the times in {path} must increase strictly.")
-    return t, data[:, 1:4]
+    return t, data[:, 1:]
 
 
 def ramp_in(times, offsets, duration):
     """A motion table's offsets ramped in over its first `duration` seconds:
     times sin^2(pi/2 (t - t0)/duration), so that a table that starts at full
     speed (such as ZZP1_A1 at t = -10 s) starts from rest with no step in the
-    point's velocity. Returns the offsets `(K, 3)`, m."""
+    point's velocity. Returns the offsets `(K, 3)` or `(K, 6)`, m (and rad)."""
     times = np.asarray(times, float)
     offsets = np.asarray(offsets, float)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"`duration` must be > 0 s; got {duration!r}.")
-    if offsets.shape != (times.shape[0], 3):
+    if (
+        offsets.ndim != 2
+        or offsets.shape[0] != times.shape[0]
+        or (offsets.shape[1] not in (3, 6))
+    ):
         raise ValueError(
-            f"`offsets` must have shape ({times.shape[0]}, 3) (one row per time); "
-            f"got {offsets.shape}."
+            f"`offsets` must have shape ({times.shape[0]}, 3) or "
+            f"({times.shape[0]}, 6) (one row per time); got {offsets.shape}."
         )
     s = np.clip((times - times[0]) / duration, 0.0, 1.0)
     return offsets * (np.sin(0.5 * np.pi * s) ** 2)[:, None]
+
+
+def _motion_key(key):
+    """('point', ID), ('body', ID) or ('rod', ID) of a `motion` dict key: a point
+    ID, or "body<n>" / "rod<n>" (any case)."""
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        return ("point", int(key))
+    parts = _decompose(str(key)) or []
+    if len(parts) == 2 and parts[0] in ("BODY", "B", "ROD", "R") and parts[1].isdigit():
+        return ("body" if parts[0][0] == "B" else "rod", int(parts[1]))
+    raise ValueError(
+        f"`motion` key {key!r} is not valid; valid: a coupled point's ID, "
+        "'body<n>' or 'rod<n>' of a coupled body or rod."
+    )
 
 
 def deck_scene(
@@ -508,14 +835,19 @@ def deck_scene(
 
     **Arguments:**
 
-    - `motion`: None (coupled points held at their deck positions), a motion table
-      path or `(times, offsets (K, 3))`: a translation added to every coupled
-      point's deck position, or a dict {point ID: any jaxstring end condition}.
+    - `motion`: None (coupled objects held at their deck poses); a motion table
+      path or `(times, offsets (K, 3) or (K, 6))`: a translation added to every
+      coupled point's deck position and a pose offset (translation, then
+      MoorDyn's Euler angles in rad) of every coupled or coupled-pinned body and
+      rod (a coupled point has no orientation: non-zero rotations need the
+      fairleads on a coupled body); or a dict {point ID: any jaxstring end
+      condition, "body<n>" or "rod<n>": a `RigidMotion`}.
     - `t0`, `t1`: the time span, s (default: the motion table's span, else 0 and
       10 s).
-    - `static`: start from the static equilibrium at t0 (`equilibrium`), else from
-      the catenary guess (`initial_shape`).
-    - `free_points`: "hold" (MoorDyn's initial condition) or "solve".
+    - `static`: start from the static equilibrium at t0 (`equilibrium`: the
+      lines settle, bodies and rods held at their deck poses), else from the
+      catenary guess (`initial_shape`; MoorDyn's start with TmaxIC 0).
+    - `free_points`: "hold" (free points held too) or "solve".
     - `axial_drag`: the reference area of the line types' CdAx per unit length,
       `"surface"` (pi d, MoorDyn's) or `"diameter"` (d, DNV-OS-E301's and
       OrcaFlex's chain convention; see `Drag`).
@@ -530,17 +862,31 @@ def deck_scene(
         times, offsets = read_motion(motion)
     elif isinstance(motion, tuple):
         times, offsets = (np.asarray(m, float) for m in motion)
-    coupled = [p for p in deck.points if p["kind"] == "coupled"]
-    ends = {}
+        if offsets.ndim != 2 or offsets.shape[1] not in (3, 6):
+            raise ValueError(
+                f"`motion` offsets must have shape (K, 3) or (K, 6); got "
+                f"{offsets.shape}."
+            )
+    coupled = {("point", p["id"]) for p in deck.points if p["kind"] == "coupled"}
+    coupled |= {("body", b["id"]) for b in deck.bodies
+                if b["kind"] in ("coupled", "coupled_pinned")}  # fmt: skip
+    coupled |= {("rod", r["id"]) for r in deck.rods
+                if r["kind"] in ("coupled", "coupled_pinned")}  # fmt: skip
+    given = {}
     if isinstance(motion, dict):
-        unknown = set(motion) - {p["id"] for p in coupled}
+        given = {_motion_key(k): v for k, v in motion.items()}
+        unknown = sorted(set(given) - coupled)
         if unknown:
             raise ValueError(
-                f"`motion` names points {sorted(unknown)} that are not coupled "
-                f"(coupled: {[p['id'] for p in coupled]})."
+                f"`motion` names {unknown} that are not coupled (coupled: "
+                f"{sorted(coupled)})."
             )
-        ends = dict(motion)
-    points, index = [], {}
+        for k, v in given.items():
+            if k[0] != "point" and not isinstance(v, RigidMotion):
+                raise ValueError(
+                    f"`motion` for {k[0]} {k[1]} must be a RigidMotion; got {v!r}."
+                )
+    table6 = None
     smoothing = 0.0
     if times is not None:
         # Smooth the knots over one sample (a box filter: C1 motion for the
@@ -549,21 +895,55 @@ def deck_scene(
         smoothing = float(np.min(np.diff(times)))
         times = np.append(times, 2 * times[-1] - times[-2])
         offsets = np.concatenate([offsets, 2 * offsets[-1:] - offsets[-2:-1]])
+        table6 = np.zeros((len(times), 6))
+        table6[:, : offsets.shape[1]] = offsets
+        if np.any(table6[:, 3:] != 0) and any(k[0] == "point" for k in coupled):
+            raise ValueError(
+                "`motion`: the table has rotations (columns 5-7) and the deck has "
+                "coupled points, which have no orientation; valid: zero rotations, "
+                "or the fairleads as points on a coupled body."
+            )
+
+    def rigid_motion(key):
+        if key in given:
+            return given[key]
+        if table6 is not None:
+            return RigidMotion(times, table6, smoothing)
+        return None
+
+    body_index = {b["id"]: k for k, b in enumerate(deck.bodies)}
+    points, index = [], {}
     for p in deck.points:
         index[p["id"]] = len(points)
         pos = np.asarray(p["position"], float)
         if p["kind"] == "free":
             points.append(FreePoint(pos, p["mass"], p["volume"], p["CdA"], p["Ca"]))
-        elif p["id"] in ends:
-            points.append(ends[p["id"]])
+        elif p["kind"] == "body":
+            points.append(BodyPoint(body_index[p["body"]], pos, p["mass"],
+                                    p["volume"], p["CdA"], p["Ca"]))  # fmt: skip
+        elif ("point", p["id"]) in given:
+            points.append(given[("point", p["id"])])
         elif p["kind"] == "coupled" and times is not None:
-            points.append(PrescribedEnd(times, pos + offsets, smoothing))
+            points.append(PrescribedEnd(times, pos + table6[:, :3], smoothing))
         else:
             points.append(FixedEnd(pos))
+    bodies = tuple(_deck_body(b) for b in deck.bodies)
+    body_motions = tuple(
+        rigid_motion(("body", b["id"])) if b["kind"] != "fixed" else None
+        for b in deck.bodies
+    )
+    if not any(m is not None for m in body_motions):
+        body_motions = ()
+    rods = _deck_rods(deck, rigid_motion)
+
+    def end(e):
+        return RodEnd(e[0] - 1, e[1]) if isinstance(e, tuple) else index[e]
+
     col = lambda key: jnp.asarray([deck.types[ln["type"]][key] for ln in deck.lines])
+    EI = col("EI")
     model = LineNetwork(
         points=tuple(points),
-        attach=tuple((index[ln["a"]], index[ln["b"]]) for ln in deck.lines),
+        attach=tuple((end(ln["a"]), end(ln["b"])) for ln in deck.lines),
         segments=tuple(ln["segments"] for ln in deck.lines),
         L=jnp.asarray([ln["L"] for ln in deck.lines]),
         d=col("d"),
@@ -576,8 +956,17 @@ def deck_scene(
         CaAx=col("CaAx"),
         line_ids=tuple(ln["id"] for ln in deck.lines),
         point_ids=tuple(p["id"] for p in deck.points),
+        # bending is traced only for a deck that names some
+        EI=EI if bool(jnp.any(EI > 0)) else None,
+        rods=rods,
+        bodies=bodies,
+        body_motions=body_motions,
     )
     effects = [Gravity(), Buoyancy(), Drag(axial_area=axial_drag)]
+    if o["rho"] == 0:
+        # a deck in vacuum (WtrDnsty 0): no buoyancy, drag or added mass is traced
+        effects = [Gravity()]
+        model = _without_added_mass(model)
     if o["depth"] > 0:
         effects.append(
             Seabed(
@@ -589,7 +978,7 @@ def deck_scene(
             )
         )
     effects = tuple(effects)
-    env = Environment(g=o["g"], rho_water=o["rho"])
+    env = Environment(g=o["g"], rho_water=o["rho"] if o["rho"] > 0 else 1025.0)
     if t0 is None:
         t0 = float(times[0]) if times is not None else 0.0
     if t1 is None:
@@ -602,8 +991,90 @@ def deck_scene(
     return Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
 
 
+def _without_added_mass(model):
+    """The network with every added-mass coefficient zero (a deck in vacuum)."""
+    zero = jnp.zeros_like(model.Ca)
+    model = eqx.tree_at(lambda m: (m.Ca, m.CaAx), model, (zero, zero))
+    for i, p in enumerate(model.points):
+        if isinstance(p, (FreePoint, BodyPoint)):
+            model = eqx.tree_at(lambda m: m.points[i].Ca, model, jnp.zeros(()))
+    for r in range(len(model.rods)):
+        model = eqx.tree_at(lambda m: (m.rods[r].Ca, m.rods[r].CaEnd), model,
+                            (jnp.zeros(()), jnp.zeros(())))  # fmt: skip
+    for b in range(len(model.bodies)):
+        model = eqx.tree_at(lambda m: m.bodies[b].Ca, model, jnp.zeros(3))
+    return model
+
+
+_BODY_KIND = {"fixed": "fixed", "free": "free", "coupled": "coupled",
+              "coupled_pinned": "pinned"}  # fmt: skip
+
+
+def _deck_body(b) -> Body:
+    """A deck's body as a `Body`. MoorDyn zeroes the mass, volume, inertia, drag
+    and added mass of fixed and coupled bodies (only what is on them counts)."""
+    kind = _BODY_KIND[b["kind"]]
+    inert = b["kind"] in ("fixed", "coupled")
+    values = {
+        "mass": 0.0 if inert else b["mass"],
+        "cg": b["cg"],
+        "inertia": [0.0] * 3 if inert else b["inertia"],
+        "volume": 0.0 if inert else b["volume"],
+        "CdA": [0.0] * 6 if inert else b["CdA"],
+        "Ca": [0.0] * 3 if inert else b["Ca"],
+    }
+    name = f"body {b['id']}"
+    if kind == "free" and values["mass"] == 0 and values["volume"] == 0:
+        # a free body whose inertia is all in the points and rods on it
+        # (MoorDyn's orbitalBody; parse_moordyn checks that there are some):
+        # built with a placeholder mass, which is then set to zero
+        body = Body(kind, b["position"], b["angles"], **{**values, "mass": 1.0},
+                    name=name)  # fmt: skip
+        return eqx.tree_at(lambda x: x.mass, body, jnp.zeros(()))
+    return Body(kind, b["position"], b["angles"], **values, name=name)
+
+
+def _deck_rods(deck, rigid_motion) -> tuple:
+    """The deck's rods as `Rod`s."""
+    body_index = {b["id"]: k for k, b in enumerate(deck.bodies)}
+    rods = []
+    for r in deck.rods:
+        if r["segments"] == 0:
+            raise ValueError(
+                f"{deck.path}: line {r['line']}: rod {r['id']} has NumSegs 0 (a "
+                "zero-length joint), which is not simulated; valid: NumSegs >= 1."
+            )
+        t = deck.rod_types[r["type"]]
+        motion = None
+        if r["kind"] in ("coupled", "coupled_pinned"):
+            motion = rigid_motion(("rod", r["id"]))
+        rods.append(
+            Rod(
+                r["end_a"],
+                r["end_b"],
+                r["segments"],
+                t["d"],
+                t["w"],
+                t["Cd"],
+                t["Ca"],
+                t["CdEnd"],
+                t["CaEnd"],
+                kind=r["kind"],
+                body=None if r["body"] is None else body_index[r["body"]],
+                motion=motion,
+            )  # fmt: skip
+        )
+    return tuple(rods)
+
+
 def read_moordyn(
-    path, motion=None, t1=None, t0=None, static=True, axial_drag="surface"
+    path,
+    motion=None,
+    t1=None,
+    t0=None,
+    static=True,
+    axial_drag="surface",
+    free_points="hold",
 ) -> Scene:
     """Read a MoorDyn v2 deck into a `Scene` at static equilibrium (see
     `parse_moordyn` and `deck_scene` for the arguments)."""
@@ -614,6 +1085,7 @@ def read_moordyn(
         t0=t0,
         static=static,
         axial_drag=axial_drag,
+        free_points=free_points,
     )
 
 
@@ -623,7 +1095,7 @@ def _rest_observables(scene):
     y = scene.y0.at[:, 3:].set(0.0)
     st = model._state(scene.t0, y, scene.effects, scene.env)
     st = eqx.tree_at(lambda s: s.held_acc, st, jnp.zeros_like(st.held_acc))
-    zero = jnp.zeros((model.topology.n_state, 3))
+    zero = jnp.zeros((model.topology.n_bodies, 3))
     fa, fb = model.end_forces(st, zero)
     return {"tension_a": jnp.linalg.norm(fa, axis=1),
             "tension_b": jnp.linalg.norm(fb, axis=1)}  # fmt: skip
@@ -650,22 +1122,106 @@ def static_tensions(scene: Scene) -> dict:
 
 
 def output_channels(traj, scene: Scene) -> dict:
-    """MoorDyn-style channels of a trajectory: `Time`; per line `FAIRTEN<id>`
-    (end B) and `ANCHTEN<id>` (end A) tension magnitudes, N; per line node
-    `L<id>N<i>P{X,Y,Z}` positions, m. Returns an ordered dict name -> `(T,)`."""
+    """MoorDyn-style channels of a trajectory (MoorDyn's names and units):
+
+    - `Time`, s;
+    - per line: `FAIRTEN<id>` (end B) and `ANCHTEN<id>` (end A) tension
+      magnitudes, N; per line node `L<id>N<i>P{X,Y,Z}` positions, m;
+    - per rod (IDs 1, 2, ... in deck order): `ROD<id>P{X,Y,Z}` (end A, m),
+      `ROD<id>R{X,Y}` (the axis' inclination phi from +z and heading beta as
+      -phi sin(beta), phi cos(beta), deg), `ROD<id>V{X,Y,Z}` (m/s),
+      `ROD<id>RV{X,Y,Z}` (deg/s), `ROD<id>A{X,Y,Z}` (m/s^2),
+      `ROD<id>RA{X,Y,Z}` (deg/s^2), `ROD<id>F{X,Y,Z}` (N) and `ROD<id>M{X,Y,Z}`
+      (N m, about end A: everything on the rod, less its inertia for a coupled
+      rod), `ROD<id>TENA`, `ROD<id>TENB` (the lines' end forces on each end, N),
+      `ROD<id>N<i>P{X,Y,Z}` (nodes, m);
+    - per body (IDs 1, 2, ... in deck order): `BODY<id>P{X,Y,Z}` (the
+      reference point, m), `BODY<id>R{X,Y,Z}` (MoorDyn's Euler angles, deg),
+      `BODY<id>V{X,Y,Z}` (m/s), `BODY<id>RV{X,Y,Z}` (deg/s),
+      `BODY<id>A{X,Y,Z}` (m/s^2), `BODY<id>RA{X,Y,Z}` (deg/s^2),
+      `BODY<id>F{X,Y,Z}` (N), `BODY<id>M{X,Y,Z}` (N m, about the reference
+      point) and `BODY<id>TEN` (the force's magnitude, N): MoorDyn's getFnet
+      (`LineNetwork.observables`).
+
+    Returns an ordered dict name -> `(T,)`."""
     model = scene.model
     ids = model.line_ids or tuple(range(1, model.n_lines + 1))
+    obs = traj.obs
     ch = {"Time": np.asarray(traj.ts)}
-    ta, tb = np.asarray(traj.obs["tension_a"]), np.asarray(traj.obs["tension_b"])
+    ta, tb = np.asarray(obs["tension_a"]), np.asarray(obs["tension_b"])
     for k, lid in enumerate(ids):
         ch[f"FAIRTEN{lid}"] = tb[:, k]
         ch[f"ANCHTEN{lid}"] = ta[:, k]
-    nodes = np.asarray(traj.obs["nodes"])
+    nodes = np.asarray(obs["nodes"])
     for k, lid in enumerate(ids):
         for i, m in enumerate(model.line_nodes(k)):
             for c, axis in enumerate("XYZ"):
                 ch[f"L{lid}N{i}P{axis}"] = nodes[:, m, c]
+    if model.rods:
+        get = lambda key: np.asarray(obs[key])
+        q = get("rod_axis")
+        phi = np.arctan2(np.hypot(q[..., 0], q[..., 1]), q[..., 2])
+        level = np.hypot(q[..., 0], q[..., 1]) < 1e-6
+        beta = np.where(level, 0.0, np.arctan2(q[..., 1], q[..., 0]))
+        deg = 180.0 / np.pi
+        rx, ry = -phi * np.sin(beta) * deg, phi * np.cos(beta) * deg
+        force, ten = get("rod_force"), get("rod_end_tension")
+        rnodes = get("rod_nodes")
+        for r in range(len(model.rods)):
+            p = f"ROD{r + 1}"
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}P{axis}"] = get("rod_end_a")[:, r, c]
+            ch[f"{p}RX"], ch[f"{p}RY"] = rx[:, r], ry[:, r]
+            for key, name, scale in (("rod_velocity", "V", 1.0),
+                                     ("rod_omega", "RV", deg),
+                                     ("rod_acceleration", "A", 1.0),
+                                     ("rod_alpha", "RA", deg)):  # fmt: skip
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, r, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}F{axis}"] = force[:, r, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}M{axis}"] = force[:, r, 3 + c]
+            ch[f"{p}TENA"], ch[f"{p}TENB"] = ten[:, r, 0], ten[:, r, 1]
+            for i, m in enumerate(model.rod_nodes(r)):
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}N{i}P{axis}"] = rnodes[:, m, c]
+    if model.bodies:
+        get = lambda key: np.asarray(obs[key])
+        deg = 180.0 / np.pi
+        force = get("body_force")
+        for b in range(len(model.bodies)):
+            p = f"BODY{b + 1}"
+            for key, name, scale in (("body_position", "P", 1.0),
+                                     ("body_angles", "R", deg),
+                                     ("body_velocity", "V", 1.0),
+                                     ("body_omega", "RV", deg),
+                                     ("body_acceleration", "A", 1.0),
+                                     ("body_alpha", "RA", deg)):  # fmt: skip
+                for c, axis in enumerate("XYZ"):
+                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, b, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}F{axis}"] = force[:, b, c]
+            for c, axis in enumerate("XYZ"):
+                ch[f"{p}M{axis}"] = force[:, b, 3 + c]
+            ch[f"{p}TEN"] = np.linalg.norm(force[:, b, :3], axis=1)
     return ch
+
+
+def channel_unit(name: str) -> str:
+    """MoorDyn's unit of an output channel name, e.g. `"(m)"` for `L1N3PX`."""
+    if name == "Time":
+        return "(s)"
+    if "TEN" in name:
+        return "(N)"
+    tail = re.sub(r"^(L|LINE|P|POINT|R|ROD|B|BODY)\d+(N(\d+|A|B))?", "", name)
+    return {"PX": "(m)", "PY": "(m)", "PZ": "(m)", "RX": "(deg)", "RY": "(deg)",
+            "RZ": "(deg)", "VX": "(m/s)", "VY": "(m/s)", "VZ": "(m/s)",
+            "RVX": "(deg/s)", "RVY": "(deg/s)", "RVZ": "(deg/s)", "AX": "(m/s^2)",
+            "AY": "(m/s^2)", "AZ": "(m/s^2)", "RAX": "(deg/s^2)",
+            "RAY": "(deg/s^2)", "RAZ": "(deg/s^2)", "FX": "(N)", "FY": "(N)",
+            "FZ": "(N)", "MX": "(Nm)", "MY": "(Nm)", "MZ": "(Nm)",
+            "T": "(N)"}.get(tail, "(-)")  # fmt: skip
 
 
 def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
@@ -674,8 +1230,7 @@ def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
     `<stem>.npz`. Returns both paths."""
     ch = output_channels(traj, scene)
     names = list(ch)
-    units = ["(s)"] + ["(N)" if n.endswith(("TEN", "TEN1")) or "TEN" in n else "(m)"
-                       for n in names[1:]]  # fmt: skip
+    units = [channel_unit(n) for n in names]
     data = np.stack([ch[n] for n in names], axis=1)
     os.makedirs(os.path.dirname(os.fspath(stem)) or ".", exist_ok=True)
     out = f"{stem}.out"

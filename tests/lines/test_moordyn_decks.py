@@ -45,8 +45,9 @@ def wd0050():
 def test_parse_chain_deck():
     deck = lines.parse_moordyn(lines.case_path("WD0050_Chain.txt"))
     chain = deck.types["chain"]
-    assert chain == {"d": 0.252, "w": 390.0, "EA": 1.674e9, "BA": -1.0,
-                     "Cd": 1.37, "Ca": 1.0, "CdAx": 0.64, "CaAx": 0.0}  # fmt: skip
+    assert chain == {"d": 0.252, "w": 390.0, "EA": 1.674e9, "BA": -1.0, "EI": 0.0,
+                     "Cd": 1.37, "Ca": 1.0, "CdAx": 0.64, "CaAx": 0.0,
+                     "Cl": 0.0}  # fmt: skip
     assert [p["kind"] for p in deck.points] == ["fixed", "coupled"]
     assert deck.points[0]["position"] == [400.0, 0.0, -50.0]
     assert deck.lines == [{"id": 1, "type": "chain", "a": 1, "b": 2, "L": 410.0,
@@ -90,12 +91,12 @@ def test_malformed_row_names_line_and_column(tmp_path):
 def test_unsupported_section_and_option(tmp_path):
     rows = _deck_lines()
     k = next(i for i, r in enumerate(rows) if "LINES" in r)
-    rods = [
-        "---------------------- RODS ----------------------------",
-        "ID RodType Attachment Xa Ya Za Xb Yb Zb NumSegs RodOutputs",
+    failure = [
+        "---------------------- FAILURE ----------------------------",
+        "ID Point Line FailTen",
     ]
-    with pytest.raises(ValueError, match=rf"line {k + 1}, column 1: section 'RODS'"):
-        lines.parse_moordyn(_write(tmp_path, "\n".join(rows[:k] + rods + rows[k:])))
+    with pytest.raises(ValueError, match=rf"line {k + 1}, column 1: section 'FAILURE'"):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows[:k] + failure + rows[k:])))
     rows = _deck_lines()
     k = next(i for i, r in enumerate(rows) if "WtrDpth" in r)
     rows.insert(k, "1             WaterKin      wave kinematics")
@@ -107,6 +108,11 @@ def test_bad_point_type(tmp_path):
     rows = _deck_lines()
     k = next(i for i, r in enumerate(rows) if r.startswith("2     Free"))
     rows[k] = rows[k].replace("Free", "Body1")
+    with pytest.raises(
+        ValueError, match=rf"line {k + 1}, column 7: .*body 1 is not in BODIES"
+    ):
+        lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
+    rows[k] = rows[k].replace("Body1", "Floating")
     with pytest.raises(ValueError, match=rf"line {k + 1}, column 7: point type"):
         lines.parse_moordyn(_write(tmp_path, "\n".join(rows)))
 
