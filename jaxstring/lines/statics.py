@@ -885,7 +885,10 @@ def _newton(system, loads, guess, cfg: _Cfg):
         dx_new, a_new, ok = step(out.free, jac.free)
         dx = jnp.where(accept, dx_new, c["dx"])
         a = jnp.where(accept, a_new, 0.5 * a)
-        done = accept & (jnp.max(jnp.abs(out.free * weights)) <= cfg.tol * fs)
+        # converged against the force scale at the accepted point (the one the
+        # returned status measures), not the start's: a start far from
+        # equilibrium has larger tensions, and would stop Newton short of `tol`
+        done = accept & (jnp.max(jnp.abs(out.free * weights)) <= cfg.tol * scale(out))
         stuck = (accept & ~ok) | (~accept & (a < 1e-12))
         flag = jnp.where(
             done, 0, jnp.where(stuck, 2, jnp.where(its >= cfg.max_iter, 1, -1))
