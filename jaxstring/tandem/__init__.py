@@ -36,7 +36,13 @@ from .scenes import (
     tandem_fishtail as tandem_fishtail,
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
+    turret_mooring as turret_mooring,
     with_model_mismatch as with_model_mismatch,
+)
+from .turret import (
+    TurretLines as TurretLines,
+    offset_force_curve as offset_force_curve,
+    turret_lines as turret_lines,
 )
 from .vessels import (
     HAWSER_K_H as HAWSER_K_H,
@@ -81,7 +87,11 @@ __all__ = [
     "tandem_fishtail",
     "tandem_fpso_alone",
     "tandem_hopf",
+    "turret_mooring",
     "with_model_mismatch",
+    "TurretLines",
+    "offset_force_curve",
+    "turret_lines",
     "AbstractActuator",
     "AbstractVesselLoad",
     "ConstantThrust",
