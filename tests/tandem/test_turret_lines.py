@@ -14,6 +14,7 @@ from jaxstring import lines
 from jaxstring.tandem import (
     TurretLines,
     TurretMooring,
+    offset_force_curve,
     solve_equilibrium,
     stability,
     tandem_equilibria,
@@ -148,3 +149,21 @@ def test_tandem_runs_on_lines():
     assert np.max(np.abs(ys[:, 0] - ys[0, 0])) < 1.0
     assert np.max(np.abs(ys[:, 2])) < 0.02
     assert ys[-1, 8] > ys[0, 8]  # the shuttle's yaw grows (fishtail onset)
+
+
+@pytest.mark.slow
+def test_offset_force_curve_is_the_turret_force(measured):
+    # TurretLines.restoring_force (through offset_force_curve, its own compile)
+    # is the statics' coupled force at the same offsets; the spring's is its
+    # closed form
+    m, F, K, _ = measured
+    np.testing.assert_allclose(
+        offset_force_curve(m, CURVE), F[4:, 0], rtol=1e-9, atol=1e-3
+    )
+    np.testing.assert_allclose(
+        offset_force_curve(TurretMooring(), CURVE),
+        1e5 * (1 + CURVE**2 / 50.0**2) * CURVE,
+        rtol=1e-12,
+    )
+    with pytest.raises(ValueError, match="`mooring`"):
+        offset_force_curve("spring", CURVE)
