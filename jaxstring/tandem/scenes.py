@@ -290,10 +290,15 @@ def tandem_fishtail(
     return _hawser_kind(sc, hawser, line_options)
 
 
-def tandem_hopf(F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0) -> Scene:
+def tandem_hopf(
+    F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0, mooring=None
+) -> Scene:
     """S3b: the fishtail scene at astern pull `F_ast` (N); the Hopf point is near
-    43 kN (spec). Sweep `F_ast` with `hopf_sweep`."""
-    sc = tandem_fishtail(F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c)
+    43 kN (spec). Sweep `F_ast` with `hopf_sweep`. `mooring`: as in
+    `tandem_fishtail`."""
+    sc = tandem_fishtail(
+        F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c, mooring=mooring
+    )
     return Scene(
         model=sc.model,
         effects=sc.effects,
@@ -331,6 +336,7 @@ def tandem_controlled(
     hawser="massless",
     line_options=None,
     K_I=None,
+    mooring=None,
 ) -> Scene:
     """S4: the shuttle under the nonlinear compensator (law "B") or the computed
     force PD (law "A"), in one of `ENVIRONMENTS`.
@@ -343,7 +349,10 @@ def tandem_controlled(
     `K_I` (s^-3, scalar or one per channel; law B with the massless hawser only):
     integral action; the model is then a `TandemWithIntegrator` (14 states, the
     integrators starting at 0). The spec's setting for model-error tests is
-    omega^3/10. None: no integral action."""
+    omega^3/10. None: no integral action.
+
+    `mooring`: the FPSO's turret mooring (`turret_mooring`: default the spec's
+    spring; "lines": the packaged deck's catenary lines)."""
     check_choice("env", env, tuple(ENVIRONMENTS))
     check_choice("law", law, ("A", "B"))
     if K_I is not None and (law != "B" or hawser != "massless"):
@@ -367,7 +376,7 @@ def tandem_controlled(
     else:
         ctl = ComputedForcePD.from_bandwidth(**kw)
     eff, env_ = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw)
-    eff = eff + (spec_hawser, TurretMooring(), ctl)
+    eff = eff + (spec_hawser, turret_mooring(mooring), ctl)
     y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
     if K_I is not None:
         model = TandemWithIntegrator(model)

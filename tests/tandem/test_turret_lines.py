@@ -14,14 +14,17 @@ from jaxstring import lines
 from jaxstring.tandem import (
     TurretLines,
     TurretMooring,
+    fpso_hull,
     offset_force_curve,
     solve_equilibrium,
     stability,
     tandem_equilibria,
     tandem_fishtail,
+    tandem_fpso_alone,
     turret_lines,
     turret_mooring,
 )
+from jaxstring.tandem.analysis import q_from_state, residual
 
 
 H = 0.25  # m, central-difference step
@@ -167,3 +170,21 @@ def test_offset_force_curve_is_the_turret_force(measured):
     )
     with pytest.raises(ValueError, match="`mooring`"):
         offset_force_curve("spring", CURVE)
+
+
+@pytest.mark.slow
+def test_fpso_alone_on_lines():
+    # S0 on the lines: the aligned start is an equilibrium, stable at x_t = 0.4 L
+    # as on the spring; its weathervaning eigenvalue hardly depends on the
+    # mooring, and its surge pair is the mass-spring frequency
+    # sqrt(K / (m + A11)) of the lines' stiffness
+    sc = tandem_fpso_alone(mooring="lines", psi0_deg=0.0)
+    y = np.asarray(sc.y0)
+    assert np.max(np.abs(np.asarray(residual(q_from_state(y, 1), sc)))) < 1e-9
+    eigs, kind = stability(sc, y)
+    assert kind == "stable"
+    real = eigs[np.abs(eigs.imag) < 1e-12].real
+    assert real.max() == pytest.approx(-3.37e-4, rel=1e-2)  # spring: -3.37e-4
+    h = fpso_hull()
+    w = np.sqrt(43.796e3 / float(h.m11))
+    assert np.min(eigs.imag[eigs.imag > 0]) == pytest.approx(w, rel=5e-3)
