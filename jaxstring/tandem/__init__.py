@@ -3,7 +3,8 @@ current, wind, turret mooring and hawser loads, equilibria and their stability,
 fishtailing limit cycles, and the autopilots that keep the vessels apart.
 
 Hulls, loads and the `Tandem` model in `vessels`, autopilots in `autopilot`, the
-hawser as a lumped-mass line in `line`, equilibria and limit cycles in `analysis`,
+hawser as a lumped-mass line in `line`, the turret on a MoorDyn deck's catenary
+lines in `turret`, equilibria and limit cycles in `analysis`,
 the spec's scenes in `scenes`, figures in `plot` (imported on demand: matplotlib).
 """
 
