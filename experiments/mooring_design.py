@@ -35,18 +35,22 @@ Run: ``python experiments/mooring_design.py [--quick]``.
 """
 
 import argparse
+import time
+
+
+_T0 = time.perf_counter()
 
 import _common  # noqa: F401  (thread and XLA settings first)
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from harness import clock, new_figure, savefig, set_quick, write_table
 
 import jaxstring  # noqa: F401  (float64)
 from jaxstring import lines
 from jaxstring.lines import Body, MooringPoint, MooringSystem
+from jaxstring.lines.statics import STATUS_MESSAGES
 
 
 RHO, G = 1025.0, 9.80665
@@ -91,92 +95,124 @@ def design(system, L, R):
 
 
 def surge_stiffness(L, R):
-    K, _ = lines.coupled_stiffness(design(HELD, L, R))
+    K, _ = lines.coupled_stiffness(design(HELD, L, R), throw=False)
     return K[0, 0]
 
 
-def loaded(L, R, force=SURGE, throw=True):
+def loaded(L, R, force=SURGE):
     s = design(FREE, L, R)
     return lines.mooring_equilibrium(
-        s, s.loads(body=jnp.zeros((1, 6)).at[0, 0].set(force)), throw=throw
+        s, s.loads(body=jnp.zeros((1, 6)).at[0, 0].set(force)), throw=False
     )
 
 
-def metrics(y):
+def metrics(y, force=SURGE):
+    """(surge stiffness, N/m; offset, m, largest fairlead tension, N, and shortest
+    laid length, m, under the surge force), and the equilibrium's status."""
     L, R = y[0], y[1]
-    out = loaded(L, R)
-    return jnp.stack(
+    out = loaded(L, R, force)
+    m = jnp.stack(
         [surge_stiffness(L, R), out.body_position[0, 0], jnp.max(out.tension[:, 1]),
          jnp.min(out.catenary.LB)]
     )  # fmt: skip
-
-
-def solve_design(k_target, t_limit):
-    def residual(y, args):
-        k, t = args
-        m = metrics(y)
-        return jnp.stack([m[0] / k - 1.0, m[2] / t - 1.0])
-
-    solver = optx.Newton(rtol=1e-10, atol=1e-10)
-
-    @jax.jit
-    def run(k, t):
-        sol = optx.root_find(residual, solver, jnp.asarray(OC3), args=(k, t),
-                             max_steps=50)  # fmt: skip
-        return sol.value, sol.stats["num_steps"], metrics(sol.value)
-
-    return run
+    return m, out.status
 
 
 @jax.jit
+def evaluate(y, force=SURGE):
+    """`metrics` and their exact Jacobian w.r.t. (L, R): the one compiled program
+    of the study (the design's Newton steps, the scan and the curves call it)."""
+    def both(y):
+        m, status = metrics(y, force)
+        return m, (m, status)
+
+    J, (m, status) = jax.jacfwd(both, has_aux=True)(y)
+    return m, J, status
+
+
+def _checked(y, force=SURGE):
+    y, force = (jnp.asarray(v, jnp.float64) for v in (y, force))
+    m, J, status = evaluate(y, force)
+    if int(status) != 0:
+        raise RuntimeError(
+            f"no equilibrium at L, R = {np.asarray(y)}: "
+            f"{STATUS_MESSAGES[int(status)]}"
+        )
+    return np.asarray(m), np.asarray(J)
+
+
+def solve_design(k_target, t_limit, y0=OC3, rtol=1e-10, atol=1e-10, max_steps=50):
+    """Newton's method on (k/k_target - 1, T/t_limit - 1) = 0 in (L, R) from `y0`,
+    with the exact Jacobian; stops when a step is within atol + rtol |y| (as
+    optimistix's Newton). Returns (L, R), the steps taken and the metrics there."""
+    scale = np.array([k_target, 0.0, t_limit, 0.0])
+    y = np.asarray(y0, float)
+    for step in range(1, max_steps + 1):
+        m, J = _checked(y)
+        r = np.array([m[0] / scale[0] - 1.0, m[2] / scale[2] - 1.0])
+        Jr = np.stack([J[0] / scale[0], J[2] / scale[2]])
+        dy = np.linalg.solve(Jr, -r)
+        y = y + dy
+        if np.all(np.abs(dy) <= atol + rtol * np.abs(y)):
+            break
+    m, _ = _checked(y)
+    return y, step, m
+
+
 def curve(L, R, forces):
-    out = jax.vmap(lambda f: loaded(L, R, f, throw=False))(forces)
-    return out.body_position[:, 0, 0], jnp.max(out.tension[:, :, 1], axis=1), out.status
+    """Offset, largest fairlead tension and status under each surge force."""
+    y = jnp.asarray([L, R], jnp.float64)
+    out = [evaluate(y, jnp.asarray(f, jnp.float64)) for f in forces]
+    m = np.asarray([o[0] for o in out])
+    return m[:, 1], m[:, 2], np.asarray([int(o[2]) for o in out])
 
 
 def main(quick=False, stiffness=60e3, tension_limit=1.66e6):
     set_quick(quick)
-    run = solve_design(stiffness, tension_limit)
-    (y, steps, m), first_s, _ = clock(lambda: jax.block_until_ready(
-        run(stiffness, tension_limit)))  # fmt: skip
-    # solve again from OC3's design, compiled: the design's own time
-    (y, steps, m), solve_s, _ = clock(lambda: jax.block_until_ready(
-        run(stiffness, tension_limit)))  # fmt: skip
-    base = np.asarray(jax.jit(metrics)(jnp.asarray(OC3)))
-    m = np.asarray(m)
+    # the first call traces and compiles the study's one program
+    (base, _), first_s, _ = clock(lambda: _checked(OC3))
+    _, again_s, _ = clock(lambda: _checked(OC3))
+    (y, steps, m), solve_s, _ = clock(lambda: solve_design(stiffness, tension_limit))
     L, R = (float(v) for v in y)
-    rows = [
-        dict(design="OC3-Hywind", L_m=OC3[0], anchor_radius_m=OC3[1],
-             surge_stiffness_kN_m=base[0] / 1e3, offset_1MN_m=base[1],
-             max_tension_1MN_kN=base[2] / 1e3, min_laid_length_1MN_m=base[3],
-             newton_steps=None, compile_s=None,
-             solve_s=None),
-        dict(design="designed", L_m=L, anchor_radius_m=R,
-             surge_stiffness_kN_m=m[0] / 1e3, offset_1MN_m=m[1],
-             max_tension_1MN_kN=m[2] / 1e3, min_laid_length_1MN_m=m[3],
-             newton_steps=int(steps),
-             compile_s=first_s - solve_s, solve_s=solve_s),
-    ]  # fmt: skip
-    notes = [
-        f"targets: surge stiffness {stiffness / 1e3:g} kN/m, largest fairlead "
-        f"tension under a {SURGE / 1e6:g} MN surge force {tension_limit / 1e3:g} kN",
-        "solve_s: optimistix Newton from OC3's design to the new one, compiled "
-        "(each step: the free spar's equilibrium, the held spar's stiffness, and "
-        "the exact Jacobian of both w.r.t. (L, R)); compile_s: the first call "
-        "less that",
-    ]
+    scan = []
     if not quick:
         # the tension under the load along the stiffness target
         from scipy.optimize import brentq
 
-        k_of = jax.jit(surge_stiffness)
-        t_of = jax.jit(lambda L, R: jnp.max(loaded(L, R).tension[:, 1]))
-        scan = []
         for Ls in (L - 20.0, L, L + 20.0, 880.0, 900.0, 920.0):
-            Rs = brentq(lambda r: float(k_of(Ls, r)) / stiffness - 1.0, Ls - 80.0,
-                        Ls - 10.0, xtol=1e-9)  # fmt: skip
-            t = float(t_of(Ls, Rs))
+            Rs = brentq(lambda r: _checked((Ls, r))[0][0] / stiffness - 1.0,
+                        Ls - 80.0, Ls - 10.0, xtol=1e-9)  # fmt: skip
+            t = _checked((Ls, Rs))[0][2]
             scan.append(f"L = {Ls:.1f} m, R = {Rs:.1f} m: {t / 1e3:.1f} kN")
+    forces = np.linspace(0.0, 2e6, 9 if quick else 41)
+    curves = {
+        name: curve(Lc, Rc, forces)
+        for name, (Lc, Rc) in (("OC3-Hywind", OC3), ("designed", (L, R)))
+    }
+    total_s = time.perf_counter() - _T0
+    rows = [
+        dict(design="OC3-Hywind", L_m=OC3[0], anchor_radius_m=OC3[1],
+             surge_stiffness_kN_m=base[0] / 1e3, offset_1MN_m=base[1],
+             max_tension_1MN_kN=base[2] / 1e3, min_laid_length_1MN_m=base[3],
+             newton_steps=None, compile_s=None, solve_s=None),
+        dict(design="designed", L_m=L, anchor_radius_m=R,
+             surge_stiffness_kN_m=m[0] / 1e3, offset_1MN_m=m[1],
+             max_tension_1MN_kN=m[2] / 1e3, min_laid_length_1MN_m=m[3],
+             newton_steps=int(steps), compile_s=first_s - again_s,
+             solve_s=solve_s),
+    ]  # fmt: skip
+    notes = [
+        f"targets: surge stiffness {stiffness / 1e3:g} kN/m, largest fairlead "
+        f"tension under a {SURGE / 1e6:g} MN surge force {tension_limit / 1e3:g} kN",
+        "solve_s: Newton from OC3's design to the new one, compiled (each step: "
+        "the free spar's equilibrium, the held spar's stiffness, and the exact "
+        "Jacobian of both w.r.t. (L, R), one call of the compiled program); "
+        "compile_s: its first call less a second one",
+        f"the study from the start of the script to the curves (imports, "
+        f"compilation, design, scan, {2 * len(forces)} equilibria of the curves): "
+        f"{total_s:.1f} s",
+    ]
+    if scan:
         notes.append("on the stiffness target: " + "; ".join(scan))
     write_table(
         "mooring_design",
@@ -197,13 +233,12 @@ def main(quick=False, stiffness=60e3, tension_limit=1.66e6):
         "surge-stiffness target and a tension limit",
         notes=notes,
     )
-    forces = jnp.linspace(0.0, 2e6, 9 if quick else 41)
     fig, axes = new_figure(ncols=2, w=5.0, h=3.8)
     a1, a2 = axes[0]
     for name, (Lc, Rc), style in (("OC3-Hywind", OC3, "--"), ("designed", (L, R), "-")):
-        x, t, st = (np.asarray(v) for v in curve(Lc, Rc, forces))
+        x, t, st = curves[name]
         ok = st == 0
-        a1.plot(np.asarray(forces)[ok] / 1e6, x[ok], style,
+        a1.plot(forces[ok] / 1e6, x[ok], style,
                 label=f"{name}: L = {Lc:.1f} m, R = {Rc:.1f} m")  # fmt: skip
         a2.plot(x[ok], t[ok] / 1e6, style, label=name)
     a2.axhline(tension_limit / 1e6, color="k", lw=0.8, ls=":")

@@ -54,12 +54,11 @@ is not modelled). The sea surface is not modelled either: a buoyant line
 ($W < 0$) floats up freely.
 """
 
-from functools import partial
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float, Int
 
 from .._geometry import safe_norm
@@ -189,33 +188,15 @@ def _seabed_integral(s, HF, LB, cbw):
     )
 
 
-def _closure(HF, VF, L, EA, W, CB, contact):
-    """The spans (X, Z) reached by a line with fairlead tensions (HF, VF), its
-    anchor tensions (HA, VA) and its laid length LB. `contact`: the anchor lies on
-    the seabed and W > 0."""
-    Va = VF - W * L
-    on_bed = contact & (Va < 0)
-    Ws = jnp.where(contact, W, 1.0)
-    ell = jnp.where(on_bed, VF / Ws, L)  # suspended unstretched length
-    LB = L - ell
-    Vb = jnp.where(on_bed, 0.0, Va)  # vertical tension at the suspended part's foot
-    cbw = CB * W
-    X = (
-        LB
-        + _seabed_integral(LB, HF, LB, cbw) / EA
-        + ell * _cos_mean(HF, VF, Vb)[0]
-        + HF * ell / EA
-    )
-    Z = ell * _sin_mean(HF, VF, Vb) + (Vb * ell + 0.5 * W * ell * ell) / EA
-    HA = jnp.where(on_bed, jnp.maximum(HF - cbw * LB, 0.0), HF)
-    return X, Z, HA, Vb, LB
+def _closure(HF, VF, L, EA, W, CB, contact, jacobian=False):
+    r"""The spans (X, Z) reached by a line with fairlead tensions (HF, VF), its
+    anchor tensions (HA, VA) and its laid length LB; with `jacobian`, also
+    $\partial(X, Z)/\partial(H_F, V_F)$ (2x2). `contact`: the anchor lies on the
+    seabed and W > 0.
 
-
-def _closure_jacobian(HF, VF, L, EA, W, CB, contact):
-    r"""$\partial(X, Z)/\partial(H_F, V_F)$ of `_closure`, written out (cheaper to
-    compile than automatic differentiation, and it keeps the cancellation-free
-    forms). Free of the seabed ($\ell = L$, $V_b = V_F - W L$), with
-    $T_F$, $T_b$ the end tensions:
+    The Jacobian is written out (cheaper to compile than automatic
+    differentiation, and it keeps the cancellation-free forms). Free of the seabed
+    ($\ell = L$, $V_b = V_F - W L$), with $T_F$, $T_b$ the end tensions:
 
     - $\partial X/\partial H_F = \ell D/H_F - Q + L/EA$,
       $\partial X/\partial V_F = \partial Z/\partial H_F = -H_F \ell E/(T_F T_b)$,
@@ -228,15 +209,21 @@ def _closure_jacobian(HF, VF, L, EA, W, CB, contact):
     Va = VF - W * L
     on_bed = contact & (Va < 0)
     Ws = jnp.where(contact, W, 1.0)
-    ell = jnp.where(on_bed, VF / Ws, L)
+    ell = jnp.where(on_bed, VF / Ws, L)  # suspended unstretched length
     LB = L - ell
-    Vb = jnp.where(on_bed, 0.0, Va)
+    Vb = jnp.where(on_bed, 0.0, Va)  # vertical tension at the suspended part's foot
+    cbw = CB * W
+    D, D_over_H = _cos_mean(HF, VF, Vb)
+    E = _sin_mean(HF, VF, Vb)
+    X = LB + _seabed_integral(LB, HF, LB, cbw) / EA + ell * D + HF * ell / EA
+    Z = ell * E + (Vb * ell + 0.5 * W * ell * ell) / EA
+    HA = jnp.where(on_bed, jnp.maximum(HF - cbw * LB, 0.0), HF)
+    if not jacobian:
+        return X, Z, HA, Vb, LB
     TF = _safe_sqrt(HF * HF + VF * VF)
     Tb = _safe_sqrt(HF * HF + Vb * Vb)
     TT = TF * Tb
     TTs = jnp.where(TT > 0, TT, 1.0)
-    D, D_over_H = _cos_mean(HF, VF, Vb)
-    E = _sin_mean(HF, VF, Vb)
     # Q = (VF/TF - Vb/Tb)/W = (VF Tb - Vb TF)/(W TF Tb), VF - Vb = W ell: for
     # VF, Vb of one sign rationalised to HF^2 ell (VF + Vb)/(VF Tb + Vb TF)
     same = VF * Vb > 0
@@ -248,28 +235,30 @@ def _closure_jacobian(HF, VF, L, EA, W, CB, contact):
     )
     Q = num / TTs
     cross = -HF * ell * E / TTs  # dX/dVF = dZ/dHF (both are d^2 of one potential)
-    free = jnp.stack(
-        [
-            jnp.stack([ell * D_over_H - Q + L / EA, cross]),
-            jnp.stack([cross, Q + L / EA]),
-        ]
-    )
     # on the seabed: X = LB + I(LB)/EA + (HF/W) asinh(VF/HF) + HF ell/EA,
     # Z = (TF - HF)/W + VF^2/(2 W EA)
-    cbw = CB * W
     tension_at_anchor = cbw * LB <= HF
     cbw_s = jnp.where(tension_at_anchor, 1.0, cbw)
     dI_dH = jnp.where(tension_at_anchor, LB, HF / cbw_s)
     TFs = jnp.where(TF > 0, TF, 1.0)
     lift = -ell * VF / (TFs * (TF + HF))  # (HF/TF - 1)/W without cancellation
     dX_dV = lift + jnp.where(tension_at_anchor, CB * LB / EA, HF / (Ws * EA))
-    bed = jnp.stack(
-        [
-            jnp.stack([ell * D_over_H - ell / TFs + dI_dH / EA + ell / EA, dX_dV]),
-            jnp.stack([lift, ell / TFs + ell / EA]),
-        ]
+    J = jnp.where(
+        on_bed,
+        jnp.stack(
+            [
+                jnp.stack([ell * D_over_H - ell / TFs + dI_dH / EA + ell / EA, dX_dV]),
+                jnp.stack([lift, ell / TFs + ell / EA]),
+            ]
+        ),
+        jnp.stack(
+            [
+                jnp.stack([ell * D_over_H - Q + L / EA, cross]),
+                jnp.stack([cross, Q + L / EA]),
+            ]
+        ),
     )
-    return jnp.where(on_bed, bed, free)
+    return X, Z, HA, Vb, LB, J
 
 
 def _initial_guess(XF, ZF, L, EA, W):
@@ -292,12 +281,6 @@ def _initial_guess(XF, ZF, L, EA, W):
     return jnp.maximum(HF, 1e-10 * jnp.abs(W) * L), VF
 
 
-def _residual(x, theta, contact):
-    XF, ZF, L, EA, W, CB = theta
-    X, Z, *_ = _closure(x[0], x[1], L, EA, W, CB, contact)
-    return jnp.stack([X - XF, Z - ZF])
-
-
 def _solve2(J, b):
     """J^{-1} b for a 2x2 J (written out: cheaper than a batched LU under vmap)."""
     det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
@@ -310,30 +293,31 @@ def _solve2(J, b):
     return jnp.where(ok, out, 0.0)
 
 
-def _newton(theta, contact, pin, max_iter):
-    XF, ZF, L, EA, W, CB = theta
+def _newton(xz, p, contact, pin, max_iter):
+    """Damped Newton on the closure equations, values only: (HF, VF), the
+    iterations taken and the closure error there (m)."""
+    XF, ZF = xz[0], xz[1]
+    L, EA, W, CB = p[0], p[1], p[2], p[3]
     HF0, VF0 = _initial_guess(XF, ZF, L, EA, W)
     x0 = jnp.stack([jnp.where(pin, 0.0, HF0), VF0])
 
-    def resid(x):
-        r = _residual(x, theta, contact)
+    def resid(x, jacobian=False):
+        out = _closure(x[0], x[1], L, EA, W, CB, contact, jacobian)
         # a vertical line holds HF = 0 (its HF equation is singular there)
-        return r.at[0].set(jnp.where(pin, x[0], r[0]))
-
-    def jacobian(x):
-        J = _closure_jacobian(x[0], x[1], L, EA, W, CB, contact)
-        return jnp.where(pin, J.at[0].set(jnp.array([1.0, 0.0])), J)
+        r = jnp.stack([jnp.where(pin, x[0], out[0] - XF), out[1] - ZF])
+        if not jacobian:
+            return r
+        return r, jnp.where(pin, out[-1].at[0].set(jnp.array([1.0, 0.0])), out[-1])
 
     def merit(r):
         return jnp.max(jnp.abs(r))
 
     def cond(c):
-        _, it, done = c
-        return (~done) & (it < max_iter)
+        return (~c[2]) & (c[1] < max_iter)
 
     def body(c):
-        x, it, _ = c
-        r, J = resid(x), jacobian(x)
+        x, it, _, _ = c
+        r, J = resid(x, jacobian=True)
         dx = -_solve2(J, r)
         # Damped Newton (Jonkman's and MoorPy's solvers limit their steps too):
         # stop short of HF <= 0 (and of VF <= 0 with seabed contact, where the
@@ -355,35 +339,51 @@ def _newton(theta, contact, pin, max_iter):
         alphas = a_max * 0.5 ** jnp.arange(12.0)
         trial = jax.vmap(lambda a: merit(resid(x + a * dx)))(alphas)
         good = (trial <= (1.0 - 1e-4 * alphas) * m0) | (trial <= 1e-14 * L)
-        a = jnp.where(jnp.any(good), alphas[jnp.argmax(good)], alphas[-1])
-        xn = x + a * dx
+        k = jnp.where(jnp.any(good), jnp.argmax(good), 11)
+        xn = x + alphas[k] * dx
         step = jnp.max(jnp.abs(xn - x))
         # Newton converges quadratically: once a full step is this small the next
         # error is at round-off, so the iterate just taken is the answer
         done = (step <= 1e-11 * jnp.max(jnp.abs(xn))) | (m0 == 0)
         done = done | ~jnp.all(jnp.isfinite(xn))
-        return xn, it + 1, done
+        return xn, it + 1, done, trial[k]
 
-    x, it, _ = jax.lax.while_loop(cond, body, (x0, jnp.asarray(0), jnp.asarray(False)))
-    return x, it
-
-
-@partial(jax.custom_jvp, nondiff_argnums=(3,))
-def _solve(theta, contact, pin, max_iter):
-    """(HF, VF) solving the closure equations; iterations as a float."""
-    x, it = _newton(theta, contact, pin, max_iter)
-    return x, it.astype(jnp.float64)
+    init = (x0, jnp.asarray(0), jnp.asarray(False), jnp.asarray(jnp.inf))
+    x, it, _, res = jax.lax.while_loop(cond, body, init)
+    return x, it, res
 
 
-@_solve.defjvp
-def _solve_jvp(max_iter, primals, tangents):
-    theta, contact, pin = primals
-    dtheta = tangents[0]
-    x, it = _solve(theta, contact, pin, max_iter)
-    XF, ZF, L, EA, W, CB = theta
-    Jx = _closure_jacobian(x[0], x[1], L, EA, W, CB, contact)
-    # the residual's change with the parameters, along dtheta (one JVP)
-    rt = jax.jvp(lambda t: _residual(x, t, contact), (theta,), (dtheta,))[1]
+@jax.custom_jvp
+def _implicit(xz, p, x, contact, pin):
+    """`x` = (HF, VF), the solution of the closure equations at the fairlead's
+    span `xz` = (XF, ZF) and the line's `p` = (L, EA, W, CB), carrying the
+    implicit derivative: Newton's iteration runs on the values alone, so it is
+    traced once however often the solution is differentiated."""
+    del xz, p, contact, pin
+    return x
+
+
+def _implicit_jvp(primals, tangents):
+    xz, p, x, contact, pin = primals
+    dxz, dp = tangents[0], tangents[1]
+    # x as a function of (xz, p): differentiating this rule again (second and
+    # higher derivatives) differentiates it through this call, not through a
+    # new Newton iteration
+    x = _implicit(xz, p, x, contact, pin)
+    L, EA, W, CB = p[0], p[1], p[2], p[3]
+    Jx = _closure(x[0], x[1], L, EA, W, CB, contact, jacobian=True)[-1]
+    # the residual (X - XF, Z - ZF)'s change along the tangents; a tangent that
+    # is known to be zero (parameters held while positions move) costs nothing
+    rt = jnp.zeros(2, x.dtype)
+    if not isinstance(dp, SymbolicZero):
+
+        def spans(p):
+            X, Z, *_ = _closure(x[0], x[1], p[0], p[1], p[2], p[3], contact)
+            return jnp.stack([X, Z])
+
+        rt = rt + jax.jvp(spans, (p,), (dp,))[1]
+    if not isinstance(dxz, SymbolicZero):
+        rt = rt - dxz
     # A slack vertical line (HF = 0 with the line's lowest point between its
     # ends): X grows like HF log(1/HF), so dX/dHF is infinite and dHF = 0.
     slack_vertical = pin & (x[1] * (x[1] - W * L) <= 0)
@@ -395,8 +395,10 @@ def _solve_jvp(max_iter, primals, tangents):
     det = Jx[0, 0] * Jx[1, 1] - Jx[0, 1] * Jx[1, 0]
     ok = ok & (det != 0)
     Jx = jnp.where(ok, Jx, jnp.eye(2))
-    dx = -_solve2(Jx, rt)
-    return (x, it), (dx, jnp.zeros_like(it))
+    return x, -_solve2(Jx, rt)
+
+
+_implicit.defjvp(_implicit_jvp, symbolic_zeros=True)
 
 
 # ---------------------------------------------------------------------------
@@ -432,9 +434,16 @@ def _check(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter):
             )
 
 
-def _catenary(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter, with_kH=False):
+def _catenary(
+    XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter, with_kH=False, given=None
+):
     """The `CatenarySolution`, and (`with_kH`) the limit of HF/XF as XF -> 0 (N/m;
-    meaningful where XF = 0)."""
+    meaningful where XF = 0).
+
+    `given`: the fairlead tensions (HF, VF), shape (2,), of a line already solved
+    at these arguments (its `CatenarySolution`'s), to differentiate the solution
+    without solving again (the diagnostics `residual`, `iterations` are then 0).
+    """
     contact = anchor_on_seabed & (W > 0)
     # no solution (the concrete checks raise on these; traced, they give NaN)
     bad = (contact & (ZF < 0)) | ~(L > 0) | ~(EA > 0) | ~(XF >= 0) | ~(CB >= 0)
@@ -460,8 +469,20 @@ def _catenary(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter, with_kH=Fal
     CBn = jnp.where(newton, CB, 0.0)
     contact_n = contact & newton
     pin = newton & (XF == 0)
-    theta = jnp.stack([XFn, ZFn, Ls, EAs, Wn, CBn])
-    x, it = _solve(theta, contact_n, pin, max_iter)
+    xz = jnp.stack([XFn, ZFn])
+    p = jnp.stack([Ls, EAs, Wn, CBn])
+    if given is None:
+        x, it, res_n = _newton(
+            jax.lax.stop_gradient(xz), jax.lax.stop_gradient(p), contact_n, pin,
+            max_iter,
+        )  # fmt: skip
+        it = it.astype(jnp.float64)
+    else:
+        # the stand-in's start (finite) where no Newton solve answers
+        x0 = jnp.stack(_initial_guess(XFn, ZFn, Ls, EAs, Wn))
+        x = jnp.where(newton, jnp.asarray(given, jnp.float64), x0)
+        it = res_n = jnp.zeros(())
+    x = _implicit(xz, p, jax.lax.stop_gradient(x), contact_n, pin)
     HFn, VFn = x[0], x[1]
     # the anchor end from the fairlead tensions (the closure's last three
     # outputs, written out so that derivatives do not trace the closure again)
@@ -469,18 +490,16 @@ def _catenary(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter, with_kH=Fal
     LBn = jnp.where(on_bed, Ls - VFn / jnp.where(contact_n, Wn, 1.0), 0.0)
     VAn = jnp.where(on_bed, 0.0, VFn - Wn * Ls)
     HAn = jnp.where(on_bed, jnp.maximum(HFn - CBn * Wn * LBn, 0.0), HFn)
-    # the closure error: a diagnostic, not differentiated
-    Xn, Zn, *_ = _closure(
-        *jax.lax.stop_gradient((HFn, VFn, Ls, EAs, Wn, CBn)), contact_n
-    )
-    rX = jnp.where(pin, HFn, Xn - XFn)
-    res_n = jax.lax.stop_gradient(jnp.maximum(jnp.abs(rX), jnp.abs(Zn - ZFn)))
+    res_n = jax.lax.stop_gradient(res_n)
     if with_kH:
         # On the vertical (HF = 0) dZ/dHF = 0, so dHF/dXF = 1/(dX/dHF): the limit
         # of HF/XF, which gives the horizontal stiffness of a vertical line; zero
         # for a slack vertical line, whose dX/dHF is infinite (X ~ HF log(1/HF)).
-        dXdH = _closure_jacobian(HFn, VFn, Ls, EAs, Wn, CBn, contact_n)[0, 0]
-        taut_vertical = pin & (VFn * (VFn - Wn * Ls) > 0) & (dXdH > 0)
+        # A vertical line (solved by Newton) hangs free of the seabed, and at
+        # HF = 0, dX/dHF = L (D/HF + 1/EA) (`_closure`, Q = 0).
+        Vb = VFn - Wn * Ls
+        dXdH = Ls * (_cos_mean(jnp.zeros_like(VFn), VFn, Vb)[1] + 1.0 / EAs)
+        taut_vertical = pin & (VFn * Vb > 0) & (dXdH > 0)
         kHn = jnp.where(taut_vertical, 1.0 / jnp.where(taut_vertical, dXdH, 1.0), 0.0)
     else:
         kHn = jnp.zeros_like(HFn)
@@ -499,25 +518,18 @@ def _catenary(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter, with_kH=Fal
     HFf = jnp.where(reaches, HF1, jnp.sqrt(arg))  # else: slack near the anchor
     HAf = jnp.maximum(HFf - cbw * Ls, 0.0)
 
+    # the answer of the case each line is in: one selection of the stacked
+    # (HF, VF, HA, VA, LB, kH) per case
     zero = jnp.zeros_like(HFn)
-    nan = jnp.full_like(HFn, jnp.nan)
-
-    def pick(newton_v, weightless_v, bunched_v, flat_v):
-        v = jnp.where(newton, newton_v, zero)
-        v = jnp.where(weightless, weightless_v, v)
-        v = jnp.where(bunched, bunched_v, v)
-        v = jnp.where(flat, flat_v, v)
-        return jnp.where(bad, nan, v)
-
-    HF = pick(HFn, HFw, zero, HFf)
-    VF = pick(VFn, VFw, W * LH, zero)
-    HA = pick(HAn, HFw, zero, HAf)
-    VA = pick(VAn, VFw, zero, zero)
-    LB = pick(LBn, zero, Ls - LH, Ls)
-    residual = pick(res_n, zero, zero, zero)
+    v = jnp.stack([HFn, VFn, HAn, VAn, LBn, kHn])
+    v = jnp.where(weightless, jnp.stack([HFw, VFw, HFw, VFw, zero, T / ds]), v)
+    v = jnp.where(bunched, jnp.stack([zero, W * LH, zero, zero, Ls - LH, zero]), v)
+    v = jnp.where(flat, jnp.stack([HFf, zero, HAf, zero, Ls, zero]), v)
+    v = jnp.where(bad, jnp.nan, v)
+    HF, VF, HA, VA, LB, kH = v
+    residual = jnp.where(bad, jnp.nan, jnp.where(newton, res_n, 0.0))
     converged = jnp.where(newton, (res_n <= tol * Ls) & jnp.isfinite(HF + VF), ~bad)
     iterations = jnp.where(newton, it, 0.0).astype(jnp.int32)
-    kH = pick(kHn, T / ds, zero, zero)
     return CatenarySolution(HF, VF, HA, VA, LB, residual, converged, iterations), kH
 
 
@@ -723,11 +735,17 @@ def catenary_forces(
     """
     _check3(anchor, fairlead)
     anchor, fairlead = _f64(anchor), _f64(fairlead)
-    dh, XF, ZF = _frame(anchor, fairlead)
+    _, XF, ZF = _frame(anchor, fairlead)
     _check(XF, ZF, L, EA, W, CB, anchor_on_seabed, tol, max_iter)
     on = jnp.asarray(anchor_on_seabed, dtype=bool)
-    rest = (*map(_f64, (L, EA, W, CB)), on, tol, int(max_iter))
-    sol, kH = _catenary(XF, ZF, *rest, with_kH=True)
+    return _forces(anchor, fairlead, *map(_f64, (L, EA, W, CB)), on, tol, max_iter)
+
+
+def _forces(anchor, fairlead, L, EA, W, CB, on, tol, max_iter, given=None):
+    """`catenary_forces` without the checks; `given` as for `_catenary`."""
+    dh, XF, ZF = _frame(anchor, fairlead)
+    rest = (L, EA, W, CB, on, tol, int(max_iter))
+    sol, kH = _catenary(XF, ZF, *rest, with_kH=True, given=given)
     pos = XF > 0
     XFs = jnp.where(pos, XF, 1.0)
     kF = jnp.where(pos, sol.HF / XFs, kH)  # HF/XF, its limit on the vertical

@@ -52,7 +52,8 @@ def case_path(name: str) -> str:
     `"pendulum.txt"`, `"lifting.txt"`, `"WD0050_Chain.txt"`,
     `"WD0200_Chain.txt"`, `"lines.txt"`, `"QuasiStatic/ZZP1_A1.txt"`,
     `"QuasiStatic/WD0050_Chain_ZZP1_A1.txt"`,
-    `"QuasiStatic/WD0200_Chain_ZZP1_A1.txt"`."""
+    `"QuasiStatic/WD0200_Chain_ZZP1_A1.txt"`; and jaxstring's own example deck
+    `"turret_fpso.txt"` (a turret-moored FPSO's nine chain/wire/chain legs)."""
     path = os.path.join(CASES_DIR, name)
     if not os.path.isfile(path):
         known = sorted(

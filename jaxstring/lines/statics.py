@@ -81,7 +81,7 @@ from .._validate import (
     show,
 )
 from .bodies import Body, euler_angles, rotation_from_vector, rotation_matrix
-from .catenary import CatenarySolution, catenary_forces
+from .catenary import CatenarySolution, _forces as _catenary_forces
 
 
 __all__ = [
@@ -561,8 +561,10 @@ def _pose(system: MooringSystem, x, u) -> _Pose:
     return _Pose(r, R, jnp.stack(Ps))
 
 
-def _line_forces(system: MooringSystem, P, tol, max_iter):
-    """Forces on each line's end A and end B (n, 2, 3), and the catenaries."""
+def _line_forces(system: MooringSystem, P, tol, max_iter, given=None):
+    """Forces on each line's end A and end B (n, 2, 3), and the catenaries.
+    `given`: the lines' solved fairlead tensions (HF, VF) at these positions, shape
+    (n, 2), to differentiate them without solving again."""
     ae = np.asarray(system.anchor_end)
     a_idx = np.array([a for a, _ in system.attach])
     b_idx = np.array([b for _, b in system.attach])
@@ -572,11 +574,12 @@ def _line_forces(system: MooringSystem, P, tol, max_iter):
     on = jnp.asarray(ae >= 0)
     W = system.submerged_weight
 
-    def one(pa, pf, L, EA, W, CB, on):
-        return catenary_forces(pa, pf, L, EA, W, CB, on, tol=tol, max_iter=max_iter)
+    def one(pa, pf, L, EA, W, CB, on, hv):
+        return _catenary_forces(pa, pf, L, EA, W, CB, on, tol, max_iter, hv)
 
+    hv = None if given is None else jnp.asarray(given)
     f_fair, f_anc, sol = jax.vmap(one)(
-        P[anc], P[fair], system.L, system.EA, W, system.CB, on
+        P[anc], P[fair], system.L, system.EA, W, system.CB, on, hv
     )
     fl = jnp.asarray(flip)[:, None]
     fA = jnp.where(fl, f_fair, f_anc)
@@ -604,10 +607,12 @@ class _Forces(NamedTuple):
     catenary: CatenarySolution
 
 
-def _forces(system: MooringSystem, loads: MooringLoads, x, u, tol, max_iter) -> _Forces:
+def _forces(
+    system: MooringSystem, loads: MooringLoads, x, u, tol, max_iter, given=None
+) -> _Forces:
     lay = system.layout
     pose = _pose(system, x, u)
-    lf, sol = _line_forces(system, pose.P, tol, max_iter)
+    lf, sol = _line_forces(system, pose.P, tol, max_iter, given)
     g, rho = system.g, system.rho
     ez = jnp.array([0.0, 0.0, 1.0])
     # net force on each point: lines, weight and buoyancy, loads
@@ -775,10 +780,12 @@ class _Cfg(NamedTuple):
     throw: bool
 
 
-def _outs(system, loads, x, u, line_tol) -> _Forces:
+def _outs(system, loads, x, u, line_tol, given=None) -> _Forces:
     """`_forces` with the catenaries' flags as floats (every output differentiable
-    or carried as a float, so that one custom JVP covers them all)."""
-    F = _forces(system, loads, x, u, line_tol, 100)
+    or carried as a float, so that one custom JVP covers them all). `given`: the
+    lines' solved (HF, VF) at this pose (n, 2), to differentiate without solving
+    the catenaries again."""
+    F = _forces(system, loads, x, u, line_tol, 100, given)
     sol = F.catenary
     sol = eqx.tree_at(
         lambda s: (s.converged, s.iterations),
@@ -878,7 +885,10 @@ def _newton(system, loads, guess, cfg: _Cfg):
         dx_new, a_new, ok = step(out.free, jac.free)
         dx = jnp.where(accept, dx_new, c["dx"])
         a = jnp.where(accept, a_new, 0.5 * a)
-        done = accept & (jnp.max(jnp.abs(out.free * weights)) <= cfg.tol * fs)
+        # converged against the force scale at the accepted point (the one the
+        # returned status measures), not the start's: a start far from
+        # equilibrium has larger tensions, and would stop Newton short of `tol`
+        done = accept & (jnp.max(jnp.abs(out.free * weights)) <= cfg.tol * scale(out))
         stuck = (accept & ~ok) | (~accept & (a < 1e-12))
         flag = jnp.where(
             done, 0, jnp.where(stuck, 2, jnp.where(its >= cfg.max_iter, 1, -1))
@@ -924,27 +934,47 @@ def _solved_jvp(cfg, primals, tangents):
     nf, nc = lay.n_free, lay.n_coupled
     u0 = jnp.zeros((nc,))
 
-    def outs(system, loads):
-        return _outs(system, loads, x, u0, cfg.line_tol)
+    # the lines as solved at the equilibrium: their derivatives come without a
+    # new catenary solve
+    hv = jnp.stack([out.catenary.HF, out.catenary.VF], axis=1)
 
-    _, d_theta = jax.jvp(outs, (system, loads), (dsystem, dloads))
+    def outs(x, system, loads):
+        return _outs(system, loads, x, u0, cfg.line_tol, hv)
+
     if nf:
         Jff = jac.free[:, :nf]
-        dx = -jnp.linalg.solve(Jff, d_theta.free)
-        d_out = jax.tree_util.tree_map(lambda t, J: t + J[..., :nf] @ dx, d_theta, jac)
+        if cfg.with_stiffness:
+            # the free forces' change at the fixed pose (the outputs' come below)
+            _, dF = jax.jvp(
+                lambda s, lo: outs(x, s, lo).free, (system, loads), (dsystem, dloads)
+            )
+            dx = -jnp.linalg.solve(Jff, dF)
+        else:
+            _, d_theta = jax.jvp(
+                lambda s, lo: outs(x, s, lo), (system, loads), (dsystem, dloads)
+            )
+            dx = -jnp.linalg.solve(Jff, d_theta.free)
+            d_out = jax.tree_util.tree_map(
+                lambda t, J: t + J[..., :nf] @ dx, d_theta, jac
+            )
     else:
         dx = jnp.zeros((0,))
-        d_out = d_theta
+        if not cfg.with_stiffness:
+            _, d_out = jax.jvp(outs, (x, system, loads), (dx, dsystem, dloads))
     if cfg.with_stiffness:
+        # every output and the force Jacobian along (dx, dtheta), in one pass
 
-        def forces_jacobian(x, system, loads):
+        def outs_and_jacobian(x, system, loads):
             def G(z):
-                F = _outs(system, loads, z[:nf], z[nf:], cfg.line_tol)
-                return jnp.concatenate([F.free, F.coupled])
+                F = _outs(system, loads, z[:nf], z[nf:], cfg.line_tol, hv)
+                return jnp.concatenate([F.free, F.coupled]), F
 
-            return jax.jacfwd(G)(jnp.concatenate([x, u0]))
+            G, F = jax.jacfwd(G, has_aux=True)(jnp.concatenate([x, u0]))
+            return F, G
 
-        _, dG = jax.jvp(forces_jacobian, (x, system, loads), (dx, dsystem, dloads))
+        _, (d_out, dG) = jax.jvp(
+            outs_and_jacobian, (x, system, loads), (dx, dsystem, dloads)
+        )
     else:
         dG = jnp.zeros_like(G)
     zeros = jax.tree_util.tree_map(jnp.zeros_like, (jac, its, flag))

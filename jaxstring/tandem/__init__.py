@@ -3,7 +3,8 @@ current, wind, turret mooring and hawser loads, equilibria and their stability,
 fishtailing limit cycles, and the autopilots that keep the vessels apart.
 
 Hulls, loads and the `Tandem` model in `vessels`, autopilots in `autopilot`, the
-hawser as a lumped-mass line in `line`, equilibria and limit cycles in `analysis`,
+hawser as a lumped-mass line in `line`, the turret on a MoorDyn deck's catenary
+lines in `turret`, equilibria and limit cycles in `analysis`,
 the spec's scenes in `scenes`, figures in `plot` (imported on demand: matplotlib).
 """
 
@@ -36,7 +37,13 @@ from .scenes import (
     tandem_fishtail as tandem_fishtail,
     tandem_fpso_alone as tandem_fpso_alone,
     tandem_hopf as tandem_hopf,
+    turret_mooring as turret_mooring,
     with_model_mismatch as with_model_mismatch,
+)
+from .turret import (
+    TurretLines as TurretLines,
+    offset_force_curve as offset_force_curve,
+    turret_lines as turret_lines,
 )
 from .vessels import (
     HAWSER_K_H as HAWSER_K_H,
@@ -81,7 +88,11 @@ __all__ = [
     "tandem_fishtail",
     "tandem_fpso_alone",
     "tandem_hopf",
+    "turret_mooring",
     "with_model_mismatch",
+    "TurretLines",
+    "offset_force_curve",
+    "turret_lines",
     "AbstractActuator",
     "AbstractVesselLoad",
     "ConstantThrust",

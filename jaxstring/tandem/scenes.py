@@ -6,6 +6,7 @@ wind and where the current come from.
 """
 
 import math
+import os
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -15,6 +16,7 @@ from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
 from .line import HAWSER_KINDS, LINE_OPTIONS, with_line
+from .turret import TurretLines, turret_lines
 from .vessels import (
     HAWSER_K_H,
     HAWSER_L0,
@@ -82,13 +84,17 @@ def _axial_loads(model, effects, env, psi):
         e
         for e in effects
         if isinstance(e, AbstractVesselLoad)
-        and not isinstance(e, (Hawser, TurretMooring))
+        and not isinstance(e, (Hawser, TurretMooring, TurretLines))
     )
     return vessel_loads(model, 0.0, y, loads, env)[:, 0]
 
 
-def _mooring_offset(mooring: TurretMooring, F):
-    """Turret offset r (m) where k_m (1 + r^2/rho_m^2) r = F."""
+def _mooring_offset(mooring, F, heading=0.0):
+    """Turret offset r (m) where the mooring's restoring force balances F (N):
+    k_m (1 + r^2/rho_m^2) r = F for the spring; for `TurretLines`, the lines'
+    force along the heading's unit vector with the turret at -r times it."""
+    if isinstance(mooring, TurretLines):
+        return mooring.offset_for_force(F, heading)
     r = F / mooring.k_m
     for _ in range(40):
         g = mooring.k_m * (1 + r**2 / mooring.rho_m**2) * r - F
@@ -101,24 +107,47 @@ def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     loads along that axis (current, and wind along the current): exact, from the
     surge balances. Returns the state."""
     hawsers = [e for e in effects if isinstance(e, Hawser)]
-    moorings = [e for e in effects if isinstance(e, TurretMooring)]
+    moorings = [e for e in effects if isinstance(e, (TurretMooring, TurretLines))]
     X = _axial_loads(model, effects, env, heading)
     e = jnp.stack([jnp.cos(heading), jnp.sin(heading)])
     if model.n_vessels == 1:
-        r = _mooring_offset(moorings[0], -X[0])
+        r = _mooring_offset(moorings[0], -X[0], heading)
         p1 = -(model.x_t + r) * e
         return jnp.concatenate([p1, jnp.array([heading, 0.0, 0.0, 0.0])])
     # Floor the tension: with a head wind stronger than the current drag there is
     # no aligned equilibrium, and this state is only a start (1 kN).
     T = jnp.maximum(-X[1] + F_ast, 1.0e3)
     d = hawsers[0].l0 + hawsers[0].stretch_for_tension(T)
-    r = _mooring_offset(moorings[0], -X[0] + T)
+    r = _mooring_offset(moorings[0], -X[0] + T, heading)
     p1 = -(model.x_t + r) * e
     P1 = p1 + model.x_h1 * e
     p2 = P1 - (d + model.x_h2) * e
     z = jnp.zeros(3)
     h = jnp.array([heading])
     return jnp.concatenate([p1, h, z, p2, h, z])
+
+
+MOORINGS = ("spring", "lines")
+
+
+def turret_mooring(mooring=None, k_m=1.0e5, c_m=6.0e5):
+    """The FPSO's turret mooring effect named by `mooring`: None or "spring" (the
+    spec's hardening spring, `TurretMooring(k_m, c_m)`), "lines" (the packaged
+    deck's catenary lines, `turret_lines()`, damping `c_m`), a path of a MoorDyn
+    deck (its lines on the turret), or a `TurretMooring` / `TurretLines` (as
+    it is)."""
+    if isinstance(mooring, (TurretMooring, TurretLines)):
+        return mooring
+    if mooring is None or mooring == "spring":
+        return TurretMooring(k_m=k_m, c_m=c_m)
+    if mooring == "lines":
+        return turret_lines(c_m=c_m)
+    if isinstance(mooring, (str, os.PathLike)) and os.path.isfile(mooring):
+        return turret_lines(mooring, c_m=c_m)
+    raise ValueError(
+        f"`mooring` must be one of {MOORINGS}, the path of a MoorDyn deck, a "
+        f"TurretMooring or a TurretLines; got {mooring!r}."
+    )
 
 
 def _perturb_shuttle_heading(model, y, angle):
@@ -131,12 +160,20 @@ def _perturb_shuttle_heading(model, y, angle):
 
 
 def tandem_fpso_alone(
-    x_t_over_L=0.40, U_c=1.0, psi0_deg=10.0, t1=20000.0, k_m=1.0e5, c_m=6.0e5
+    x_t_over_L=0.40,
+    U_c=1.0,
+    psi0_deg=10.0,
+    t1=20000.0,
+    k_m=1.0e5,
+    c_m=6.0e5,
+    mooring=None,
 ) -> Scene:
     """S0: the FPSO alone on its turret in current (hawser removed).
 
     Starts from the heading-into-current equilibrium turned by `psi0_deg` about
     the turret; forward of the critical turret position (0.355 L1) it returns.
+    `mooring`: the turret's mooring (`turret_mooring`; default the spec's spring
+    of `k_m`, `c_m`; "lines": the packaged deck's catenary lines).
     """
     check_positive("U_c", U_c, "m/s")
     check_finite("psi0_deg", psi0_deg)
@@ -148,7 +185,7 @@ def tandem_fpso_alone(
         )
     fpso = fpso_hull()
     model = MooredFPSO(fpso=fpso, x_t=x_t_over_L * fpso.L)
-    effects = (ShortWingCurrent(), TurretMooring(k_m=k_m, c_m=c_m))
+    effects = (ShortWingCurrent(), turret_mooring(mooring, k_m=k_m, c_m=c_m))
     env = Environment(current=current_field(U_c))
     y = aligned_equilibrium(model, effects, env)
     a = math.radians(psi0_deg)
@@ -160,23 +197,32 @@ def tandem_fpso_alone(
     )
 
 
-def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None):
+def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None, mooring=None):
     eff, env = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Delta_w_deg)
     hawser = Hawser(l0=l0, k_h=k_h) if hawser is None else hawser
-    eff = eff + (hawser, TurretMooring())
+    eff = eff + (hawser, turret_mooring(mooring))
     if F_ast is not None:
         eff = eff + (ConstantThrust(F_ast=F_ast),)
     return eff, env
 
 
 def tandem_equilibria(
-    V_w=0.0, Delta_w_deg=0.0, U_c=1.0, l0=HAWSER_L0, k_h=HAWSER_K_H, x_t=None, t1=1.0e4
+    V_w=0.0,
+    Delta_w_deg=0.0,
+    U_c=1.0,
+    l0=HAWSER_L0,
+    k_h=HAWSER_K_H,
+    x_t=None,
+    t1=1.0e4,
+    mooring=None,
 ) -> Scene:
     """S1/S2: the tandem in current and wind, no thrust; `y0` is the aligned
-    state (exact equilibrium for the current alone or wind along it). Use
-    `find_equilibria(scene)` for all equilibria."""
+    state (exact equilibrium for the current alone or wind along it, with the
+    spring or a mooring pattern symmetric about the heading). Use
+    `find_equilibria(scene)` for all equilibria. `mooring`: the turret's
+    (`turret_mooring`: default the spec's spring; "lines": catenary lines)."""
     model = tandem_model(x_t=x_t)
-    eff, env = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None)
+    eff, env = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None, mooring=mooring)
     y0 = aligned_equilibrium(model, eff, env)
     return Scene(
         model=model, effects=eff, y0=y0, t1=t1, name="tandem-equilibria", env=env
@@ -221,9 +267,12 @@ def tandem_fishtail(
     k_h: float = HAWSER_K_H,
     hawser="massless",
     line_options=None,
+    mooring=None,
 ) -> Scene:
     """S3a: current only, constant astern pull `F_ast` (N), from the aligned
     equilibrium with the shuttle turned by `perturbation_deg` about its bow.
+    `mooring`: the turret's (`turret_mooring`: default the spec's spring;
+    "lines": the packaged deck's catenary lines).
 
     `hawser="line"` replaces the massless hawser by a line with mass and drag
     (`with_line`; `line_options`: its keyword arguments, e.g. `N`,
@@ -234,17 +283,22 @@ def tandem_fishtail(
     check_positive("U_c", U_c, "m/s")
     _check_hawser(hawser, line_options)
     model = tandem_model()
-    eff, env = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast)
+    eff, env = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast, mooring=mooring)
     y0 = aligned_equilibrium(model, eff, env, F_ast=F_ast)
     y0 = _perturb_shuttle_heading(model, y0, math.radians(perturbation_deg))
     sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail", env=env)
     return _hawser_kind(sc, hawser, line_options)
 
 
-def tandem_hopf(F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0) -> Scene:
+def tandem_hopf(
+    F_ast=40.0e3, perturbation_deg=2.5, t1=40000.0, U_c=1.0, mooring=None
+) -> Scene:
     """S3b: the fishtail scene at astern pull `F_ast` (N); the Hopf point is near
-    43 kN (spec). Sweep `F_ast` with `hopf_sweep`."""
-    sc = tandem_fishtail(F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c)
+    43 kN (spec). Sweep `F_ast` with `hopf_sweep`. `mooring`: as in
+    `tandem_fishtail`."""
+    sc = tandem_fishtail(
+        F_ast=F_ast, perturbation_deg=perturbation_deg, t1=t1, U_c=U_c, mooring=mooring
+    )
     return Scene(
         model=sc.model,
         effects=sc.effects,
@@ -282,6 +336,7 @@ def tandem_controlled(
     hawser="massless",
     line_options=None,
     K_I=None,
+    mooring=None,
 ) -> Scene:
     """S4: the shuttle under the nonlinear compensator (law "B") or the computed
     force PD (law "A"), in one of `ENVIRONMENTS`.
@@ -294,7 +349,10 @@ def tandem_controlled(
     `K_I` (s^-3, scalar or one per channel; law B with the massless hawser only):
     integral action; the model is then a `TandemWithIntegrator` (14 states, the
     integrators starting at 0). The spec's setting for model-error tests is
-    omega^3/10. None: no integral action."""
+    omega^3/10. None: no integral action.
+
+    `mooring`: the FPSO's turret mooring (`turret_mooring`: default the spec's
+    spring; "lines": the packaged deck's catenary lines)."""
     check_choice("env", env, tuple(ENVIRONMENTS))
     check_choice("law", law, ("A", "B"))
     if K_I is not None and (law != "B" or hawser != "massless"):
@@ -318,7 +376,7 @@ def tandem_controlled(
     else:
         ctl = ComputedForcePD.from_bandwidth(**kw)
     eff, env_ = environment(U_c=U_c, V_w=V_w, Delta_w_deg=Dw)
-    eff = eff + (spec_hawser, TurretMooring(), ctl)
+    eff = eff + (spec_hawser, turret_mooring(mooring), ctl)
     y0 = controlled_start(model, span=span0, shuttle_offset_deg=shuttle_offset_deg)
     if K_I is not None:
         model = TandemWithIntegrator(model)
