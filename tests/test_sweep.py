@@ -267,7 +267,10 @@ def test_member_rms_max_is_the_largest_member_rms():
 
 @pytest.mark.parametrize(
     "solver",
-    [pytest.param("implicit_euler_fixed", marks=pytest.mark.slow), "trapezoid"],
+    [
+        pytest.param("implicit_euler_fixed", marks=pytest.mark.slow),
+        pytest.param("trapezoid", marks=pytest.mark.slow),
+    ],
 )
 def test_fixed_step_lockstep_equals_the_loop_to_rounding(solver):
     # With a fixed step every member takes the same steps alone and in the sweep;

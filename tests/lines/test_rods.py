@@ -185,6 +185,7 @@ def test_coupled_rod_follows_its_motion():
         lines.Rod([0.0, 0, -5], [0.0, 2, -5], 2, 0.2, 10.0, motion=motion)
 
 
+@pytest.mark.slow
 def test_rod_output_channels(tmp_path):
     """MoorDyn's rod channels: at rest the pinned rod lying along +x carries its
     buoyancy less its weight, (rho A L - w L) g up, and the moment of that

@@ -322,6 +322,7 @@ def _final_refresh_count(formulation, skip_after, reuse=True):
     )
 
 
+@pytest.mark.slow
 def test_stored_jacobian_skipped_only_where_it_keeps_failing():
     # Displacement variables: the springs turn with the string, so the stored
     # Jacobian nearly never contracts the Newton iteration; BDF then stops trying it

@@ -272,7 +272,9 @@ def test_fixed_step_solvers_second_order_on_string(solver):
     assert 1.8 < slope < 2.3, (slope, errs)
 
 
-@pytest.mark.parametrize("solver", ("theta", "newmark"))
+@pytest.mark.parametrize(
+    "solver", ("theta", pytest.param("newmark", marks=pytest.mark.slow))
+)
 def test_fixed_step_paper_setting_runs(solver):
     # The paper's setting: dt = 0.005, 400 steps over 2 s, EA = 1e6. Measured
     # end-mass error against Rodas5P at 1e-9: 5.2e-3 m (implicit Euler: 0.24 m).
@@ -398,7 +400,7 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
 # ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("dim", (2, 3))
+@pytest.mark.parametrize("dim", (2, pytest.param(3, marks=pytest.mark.slow)))
 @pytest.mark.parametrize("a, b", [(1.0, -1e-3), (1.0, -0.1), (100.0, -1.0)])
 def test_second_order_factor_equals_dense_solve(dim, a, b):
     # a I + b J as BDF (a = 1, b = -c) and Rodas5P (a = 1 / (h gamma), b = -1) form
@@ -558,7 +560,14 @@ class ZeroLoad(AbstractStringLoad):
         return Loads(jnp.zeros_like(kin.positions), jnp.zeros_like(kin.positions[-1]))
 
 
-@pytest.mark.parametrize("solver", ("bdf", "rodas5p", "kvaerno5"))
+@pytest.mark.parametrize(
+    "solver",
+    (
+        "bdf",
+        pytest.param("rodas5p", marks=pytest.mark.slow),
+        pytest.param("kvaerno5", marks=pytest.mark.slow),
+    ),
+)
 def test_solvers_with_the_model_jacobian_equal_the_probed_one(solver, monkeypatch):
     # k = 14 (56 states) is on the banded path (small systems go dense). The same
     # scene solved with the model's Jacobian and, through an unknown (zero) load,

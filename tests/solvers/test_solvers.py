@@ -110,7 +110,11 @@ def test_stage_newton_avoids_veryChord_early_divergence():
 
 
 @pytest.mark.parametrize(
-    "formulation", [pytest.param("natural", marks=pytest.mark.slow), "displacement"]
+    "formulation",
+    [
+        pytest.param("natural", marks=pytest.mark.slow),
+        pytest.param("displacement", marks=pytest.mark.slow),
+    ],
 )
 def test_fixed_step_newton_variants_solve_the_same_steps(formulation):
     # newton="chord": one factorisation per step and simplified Newton updates; in
