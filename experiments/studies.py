@@ -440,7 +440,7 @@ STUDIES = (
         "moordyn_bodies.py",
         "MoorDyn's body, rod and beam test decks in MoorDyn and in jaxstring.lines: "
         "the tested quantity in both codes, against the analytic value, wall times",
-        "3 min / 6 min",
+        "5 min / 8 min",
         LINES,
         (
             Run(
