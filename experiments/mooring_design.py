@@ -122,6 +122,7 @@ def metrics(y, force=SURGE):
 def evaluate(y, force=SURGE):
     """`metrics` and their exact Jacobian w.r.t. (L, R): the one compiled program
     of the study (the design's Newton steps, the scan and the curves call it)."""
+
     def both(y):
         m, status = metrics(y, force)
         return m, (m, status)
@@ -135,8 +136,7 @@ def _checked(y, force=SURGE):
     m, J, status = evaluate(y, force)
     if int(status) != 0:
         raise RuntimeError(
-            f"no equilibrium at L, R = {np.asarray(y)}: "
-            f"{STATUS_MESSAGES[int(status)]}"
+            f"no equilibrium at L, R = {np.asarray(y)}: {STATUS_MESSAGES[int(status)]}"
         )
     return np.asarray(m), np.asarray(J)
 

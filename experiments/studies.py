@@ -436,6 +436,28 @@ STUDIES = (
         ),
     ),
     Study(
+        "moordyn_bodies",
+        "moordyn_bodies.py",
+        "MoorDyn's body, rod and beam test decks in MoorDyn and in jaxstring.lines: "
+        "the tested quantity in both codes, against the analytic value, wall times",
+        "5 min / 8 min",
+        LINES,
+        (
+            Run(
+                (),
+                (
+                    *_files("moordyn_bodies"),
+                    *_files(
+                        "moordyn_bodies_orbit",
+                        "moordyn_bodies_pinned",
+                        "moordyn_bodies_beams",
+                        ext=("png",),
+                    ),
+                ),
+            ),
+        ),
+    ),
+    Study(
         "statics_moorpy",
         "statics_moorpy.py",
         "catenary statics (equilibrium, coupled stiffness, gradients) of the OC3 "
