@@ -1173,38 +1173,18 @@ def output_channels(traj, scene: Scene) -> dict:
             for c, axis in enumerate("XYZ"):
                 ch[f"{p}P{axis}"] = get("rod_end_a")[:, r, c]
             ch[f"{p}RX"], ch[f"{p}RY"] = rx[:, r], ry[:, r]
-            for key, name, scale in (("rod_velocity", "V", 1.0),
-                                     ("rod_omega", "RV", deg),
-                                     ("rod_acceleration", "A", 1.0),
-                                     ("rod_alpha", "RA", deg)):  # fmt: skip
-                for c, axis in enumerate("XYZ"):
-                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, r, c]
-            for c, axis in enumerate("XYZ"):
-                ch[f"{p}F{axis}"] = force[:, r, c]
-            for c, axis in enumerate("XYZ"):
-                ch[f"{p}M{axis}"] = force[:, r, 3 + c]
+            _rigid_channels(ch, p, get, "rod", r, force, ("V", "RV", "A", "RA"))
             ch[f"{p}TENA"], ch[f"{p}TENB"] = ten[:, r, 0], ten[:, r, 1]
             for i, m in enumerate(model.rod_nodes(r)):
                 for c, axis in enumerate("XYZ"):
                     ch[f"{p}N{i}P{axis}"] = rnodes[:, m, c]
     if model.bodies:
         get = lambda key: np.asarray(obs[key])
-        deg = 180.0 / np.pi
         force = get("body_force")
         for b in range(len(model.bodies)):
             p = f"BODY{b + 1}"
-            for key, name, scale in (("body_position", "P", 1.0),
-                                     ("body_angles", "R", deg),
-                                     ("body_velocity", "V", 1.0),
-                                     ("body_omega", "RV", deg),
-                                     ("body_acceleration", "A", 1.0),
-                                     ("body_alpha", "RA", deg)):  # fmt: skip
-                for c, axis in enumerate("XYZ"):
-                    ch[f"{p}{name}{axis}"] = scale * get(key)[:, b, c]
-            for c, axis in enumerate("XYZ"):
-                ch[f"{p}F{axis}"] = force[:, b, c]
-            for c, axis in enumerate("XYZ"):
-                ch[f"{p}M{axis}"] = force[:, b, 3 + c]
+            names = ("P", "R", "V", "RV", "A", "RA")
+            _rigid_channels(ch, p, get, "body", b, force, names)
             ch[f"{p}TEN"] = np.linalg.norm(force[:, b, :3], axis=1)
     return ch
 
@@ -1223,6 +1203,31 @@ def channel_unit(name: str) -> str:
             "RAY": "(deg/s^2)", "RAZ": "(deg/s^2)", "FX": "(N)", "FY": "(N)",
             "FZ": "(N)", "MX": "(Nm)", "MY": "(Nm)", "MZ": "(Nm)",
             "T": "(N)"}.get(tail, "(-)")  # fmt: skip
+
+
+_RIGID_CHANNELS = {
+    "P": ("position", 1.0),
+    "R": ("angles", 180.0 / np.pi),
+    "V": ("velocity", 1.0),
+    "RV": ("omega", 180.0 / np.pi),
+    "A": ("acceleration", 1.0),
+    "RA": ("alpha", 180.0 / np.pi),
+}
+"""MoorDyn's rigid-object channel -> (observable after `rod_`/`body_`, scale to
+MoorDyn's units: degrees for rotations)."""
+
+
+def _rigid_channels(ch, prefix, get, kind, i, force, names):
+    """A rod's or body's kinematic channels `names` (keys of `_RIGID_CHANNELS`),
+    then its force and moment (F, M), in MoorDyn's order, into `ch`."""
+    for name in names:
+        key, scale = _RIGID_CHANNELS[name]
+        for c, axis in enumerate("XYZ"):
+            ch[f"{prefix}{name}{axis}"] = scale * get(f"{kind}_{key}")[:, i, c]
+    for c, axis in enumerate("XYZ"):
+        ch[f"{prefix}F{axis}"] = force[:, i, c]
+    for c, axis in enumerate("XYZ"):
+        ch[f"{prefix}M{axis}"] = force[:, i, 3 + c]
 
 
 def write_outputs(traj, scene: Scene, stem) -> tuple[str, str]:
