@@ -1522,44 +1522,63 @@ def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
 def _ptc(x0, model, effects, env, t0, solve_rows, max_iter, tol, ftol):
     """Pseudo-transient continuation to a zero of the net forces: implicit Euler
     steps of x' = F(x) with a step that grows as the residual falls (a Newton
-    iteration once it is large). Returns (x, residual norm, iterations)."""
+    iteration once it is large). Returns (x, residual norm, iterations, the
+    Jacobian dF/dx at x).
+
+    Each pass of the loop evaluates the forces and their Jacobian together, once,
+    at the trial point x + dx (the Jacobian is kept where the point is accepted),
+    so that the compiled program holds one copy of the forces' Jacobian and none
+    of the forces alone; the first pass evaluates the start."""
 
     def resid(xf):
         return _equilibrium_residual(
             xf.reshape(x0.shape), model, effects, env, t0, solve_rows
         ).reshape(-1)
 
+    def resid_and_jacobian(xf):
+        J, r = jax.jacfwd(lambda z: (lambda f: (f, f))(resid(z)), has_aux=True)(xf)
+        return r, J
+
     mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
 
-    def body(c):
-        x, r, dt, it, _ = c
-        J = jax.jacfwd(resid)(x)
+    def update(r, J, dt):
         A = jnp.diag(mask / dt + (1 - mask)) - J * mask[:, None]
-        dx = jnp.linalg.solve(A, r) * mask
+        return jnp.linalg.solve(A, r) * mask
+
+    def body(c):
+        x, r, J, dt, it, _, dx, first = c
         xn = x + dx
-        rn = resid(xn)
+        rn, Jn = resid_and_jacobian(xn)
         nr, nrn = jnp.linalg.norm(r), jnp.linalg.norm(rn)
-        ok = jnp.isfinite(nrn) & (nrn < 2.0 * nr + 1e-300)
+        ok = first | (jnp.isfinite(nrn) & (nrn < 2.0 * nr + 1e-300))
         grow = jnp.clip(nr / jnp.maximum(nrn, 1e-300), 0.1, 10.0)
         dt_new = jnp.minimum(jnp.where(ok, dt * grow, dt * 0.1), 1 / _MIN_STIFFNESS)
-        step = jnp.max(jnp.abs(dx))
-        return (
-            jnp.where(ok, xn, x),
-            jnp.where(ok, rn, r),
-            dt_new,
-            it + 1,
-            jnp.where(ok, step, jnp.inf),
-        )
+        dt_new = jnp.where(first, dt, dt_new)
+        step = jnp.where(ok & ~first, jnp.max(jnp.abs(dx)), jnp.inf)
+        x = jnp.where(ok, xn, x)
+        r = jnp.where(ok, rn, r)
+        J = jnp.where(ok, Jn, J)
+        it = it + jnp.where(first, 0, 1)
+        return (x, r, J, dt_new, it, step, update(r, J, dt_new), jnp.asarray(False))
 
     def cond(c):
-        _, r, _, it, step = c
-        return (it < max_iter) & (step > tol) & (jnp.linalg.norm(r) > ftol)
+        _, r, _, _, it, step, _, first = c
+        return first | ((it < max_iter) & (step > tol) & (jnp.linalg.norm(r) > ftol))
 
     x0f = x0.reshape(-1)
-    r0 = resid(x0f)
-    init = (x0f, r0, jnp.asarray(1e-6), jnp.asarray(0), jnp.asarray(jnp.inf))
-    x, r, _, it, _ = jax.lax.while_loop(cond, body, init)
-    return x.reshape(x0.shape), jnp.linalg.norm(r), it
+    n = x0f.shape[0]
+    init = (
+        x0f,
+        jnp.zeros(n),
+        jnp.zeros((n, n)),
+        jnp.asarray(1e-6),
+        jnp.asarray(0),
+        jnp.asarray(jnp.inf),
+        jnp.zeros(n),
+        jnp.asarray(True),
+    )
+    x, r, J, _, it, _, _, _ = jax.lax.while_loop(cond, body, init)
+    return x.reshape(x0.shape), jnp.linalg.norm(r), it, J
 
 
 # The pseudo-time term 1/dt never falls below this, N/m: a slack, weightless
@@ -1567,20 +1586,14 @@ def _ptc(x0, model, effects, env, t0, solve_rows, max_iter, tol, ftol):
 _MIN_STIFFNESS = 1e-4
 
 
-def _newton_step(x, model, effects, env, t0, solve_rows):
+def _newton_step(x, J, model, effects, env, t0, solve_rows):
     """The converged `x` with the derivative of one (regularised) Newton step in
-    the parameters: the implicit-function derivative of the equilibrium."""
-    frozen = jax.lax.stop_gradient((model, effects, env))
-
-    def resid(xf, m, e, v):
-        return _equilibrium_residual(
-            xf.reshape(x.shape), m, e, v, t0, solve_rows
-        ).reshape(-1)
-
-    J = jax.jacfwd(resid)(x.reshape(-1), *frozen)
+    the parameters: the implicit-function derivative of the equilibrium. `J`: the
+    Jacobian dF/dx at `x` (the iteration's last, held constant)."""
     mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
+    J = jax.lax.stop_gradient(J)
     A = jnp.diag(mask * _MIN_STIFFNESS + (1 - mask)) - J * mask[:, None]
-    r = resid(x.reshape(-1), model, effects, env)
+    r = _equilibrium_residual(x, model, effects, env, t0, solve_rows).reshape(-1)
     dx = jnp.linalg.solve(A, r).reshape(x.shape)
     # The primal stays the converged x (the step would only amplify the residual
     # along the directions a slack line leaves free); the tangent is the step's.
@@ -1597,10 +1610,11 @@ def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
     fm, fv, _, _ = m._free_params()
     weight = v.g * (weight + jnp.sum(jnp.abs(fm - v.rho_water * fv)))
     ftol = 1e-9 * jnp.maximum(weight, 1.0)
-    x, res, it = _ptc(
+    x, res, it, J = _ptc(
         jax.lax.stop_gradient(x0), *frozen, t0, solve_rows, max_iter, tol, ftol
     )
-    x = _newton_step(jax.lax.stop_gradient(x), model, effects, env, t0, solve_rows)
+    x = jax.lax.stop_gradient(x)
+    x = _newton_step(x, J, model, effects, env, t0, solve_rows)
     return x, res, it, ftol
 
 
