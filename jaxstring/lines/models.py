@@ -1468,13 +1468,8 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     env = Environment() if env is None else env
     top = model.topology
     t0 = jnp.asarray(t0, jnp.float64)
-    hp = np.asarray(model.held_kinematics(t0)[0])
+    hp, ends, L = (np.asarray(a) for a in _start_geometry(model, t0))
     pos = np.zeros((top.n_state, 3))
-    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
-    ends = np.zeros((0, 3))
-    if model.rods or model.bodies:
-        frames = model.frames(t0, rigid)
-        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
     pts = []
     for i, p in enumerate(model.points):
         if isinstance(p, FreePoint):
@@ -1496,7 +1491,6 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     gravity = any(isinstance(e, Gravity) for e in effects)
     buoyancy = any(isinstance(e, Buoyancy) for e in effects)
     g, rho = float(env.g), float(env.rho_water)
-    L = np.asarray(model.unstretched_lengths(jnp.asarray(t0, jnp.float64))[0])
     for k, ((a, b), N) in enumerate(zip(model.attach, model.segments)):
         d = float(model.d[k])
         w = (float(model.w[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
@@ -1508,6 +1502,29 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
         rows = top.tri_rows[top.body[model.line_nodes(k)[1:-1]]]
         pos[rows] = shape[1:-1]
     y = jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    if not len(top.frames.owner):
+        return y
+    return _with_rigid_rows(model, y)
+
+
+# The start's geometry in one compiled call: op by op, the motion tables'
+# interpolation alone compiled some fifty one-operation programs.
+@eqx.filter_jit
+def _start_geometry(model: LineNetwork, t0):
+    """Held points' positions, rod ends and points on bodies, unstretched
+    lengths at `t0`."""
+    top = model.topology
+    hp = model.held_kinematics(t0)[0]
+    ends = jnp.zeros((0, 3))
+    if model.rods or model.bodies:
+        rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
+        frames = model.frames(t0, rigid)
+        ends = model._rigid_slots(frames, model._rod_geometry(frames))[0]
+    return hp, ends, model.unstretched_lengths(t0)[0]
+
+
+@eqx.filter_jit
+def _with_rigid_rows(model: LineNetwork, y):
     return model.initial_rigid_rows(y)
 
 
