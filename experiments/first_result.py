@@ -62,6 +62,23 @@ CASES = {
         "solver='implicit_euler_fixed', dt0=0.005, batch_size=16)",
     ),
 }
+# The MoorDyn deck again, read and solved for its static state in the setup, so
+# that the first call is the simulate alone, with each solver choice.
+_WD0050 = (
+    "deck = js.lines.case_path('WD0050_Chain.txt'); "
+    "scene = js.lines.read_moordyn(deck, motion=js.lines.case_path("
+    "'QuasiStatic/ZZP1_A1.txt')); js.lines.static_tensions(scene)"
+)
+for _name, _kw in (
+    ("kvaerno5", "'kvaerno5', rtol=1e-4, atol=1e-4"),
+    ("bdf", "'bdf', rtol=1e-4, atol=1e-4"),
+    ("rodas5p", "'rodas5p', rtol=1e-4, atol=1e-4"),
+    ("balanced", "accuracy='balanced'"),
+):
+    CASES[f"moordyn_wd0050_simulate_{_name}"] = (
+        _WD0050,
+        f"traj = js.simulate(scene, {_kw}); traj.ys.block_until_ready()",
+    )
 for _preset in ("draft", "balanced", "precise"):
     for _f in ("displacement", "natural", "angle"):
         CASES[f"preset_{_preset}_{_f}"] = (

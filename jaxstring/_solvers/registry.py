@@ -157,8 +157,15 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
     if solver in KVAERNO:
         if not scene.structure.stage_jacobians:
             return ESDIRK(method=solver, rtol=newton_rtol, atol=newton_atol)
+        # A Jacobian per stage: diffrax calls `init` for each stage's solve.
+        per_stage = StageNewton(
+            rtol=newton_rtol,
+            atol=newton_atol,
+            max_iters=_MAX_ITERS_ADAPTIVE,
+            first_jacobian_in_step=True,
+        )
         return KVAERNO[solver](
-            root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE
+            root_finder=per_stage, root_find_max_steps=_MAX_ITERS_ADAPTIVE
         )
     if solver == "implicit_euler":
         return ImplicitEuler(root_finder=chord, root_find_max_steps=_MAX_ITERS_ADAPTIVE)

@@ -200,6 +200,10 @@ class StageNewton(optx.AbstractRootFinder):
       contracts slower than `refresh_rate` (or, with `refresh_when_hopeless`, too
       slowly to converge within `max_iters`), at most `max_jacobians` Jacobians per
       solve (the initial one included).
+    - `first_jacobian_in_step`: `init` leaves the Jacobian to the first iteration's
+      refresh (at the same point), so that a solver that calls `init` for every
+      stage compiles the Jacobian once, not twice (with `refresh`, not `newton`;
+      not for a state handed from one stage's solve to the next).
     """
 
     rtol: Any
@@ -213,6 +217,7 @@ class StageNewton(optx.AbstractRootFinder):
     refresh_rate: float = 0.5
     max_jacobians: int = 10
     refresh_when_hopeless: bool = eqx.field(static=True, default=True)
+    first_jacobian_in_step: bool = eqx.field(static=True, default=False)
 
     def _too_slow(self, rate, size, done):
         """Hairer's prediction: contracting at `rate` (< 1) from an update of scaled
@@ -241,21 +246,27 @@ class StageNewton(optx.AbstractRootFinder):
             return init_state
         leaves = jtu.tree_leaves(y)
         dtype = jnp.result_type(*leaves) if leaves else jnp.float64
-        if _explicit_stage(args):
+        explicit = _explicit_stage(args)
+        later = self.first_jacobian_in_step and self.refresh and not self.newton
+        if explicit or later:
             # diffrax's ESDIRKs ask, once per step, for the "Jacobian" of their
             # explicit first stage (diagonal 0: the relation's Jacobian is I). It is
             # never used to solve, so build the identity factor, not a Jacobian.
+            # With `first_jacobian_in_step` the first iteration's refresh takes
+            # the Jacobian at the same point, so that the compiled solve holds one
+            # copy of the Jacobian's program instead of two.
             fac = _identity_like(eqx.filter_eval_shape(self._factor, fn, y, args))
         else:
             fac = self._factor(fn, y, args)
+        deferred = later and not explicit
         return _StageState(
             linear_state=fac,
             diffsize=jnp.array(jnp.inf, dtype=dtype),
             diffsize_prev=jnp.array(1.0, dtype=dtype),
             result=optx.RESULTS.successful,
             step=jnp.array(0),
-            n_jac=jnp.array(1),
-            refresh_next=jnp.array(False),
+            n_jac=jnp.array(0 if deferred else 1),
+            refresh_next=jnp.array(deferred),
             y_init=y,
         )
 

@@ -1468,13 +1468,8 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     env = Environment() if env is None else env
     top = model.topology
     t0 = jnp.asarray(t0, jnp.float64)
-    hp = np.asarray(model.held_kinematics(t0)[0])
+    hp, ends, L = (np.asarray(a) for a in _start_geometry(model, t0))
     pos = np.zeros((top.n_state, 3))
-    rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
-    ends = np.zeros((0, 3))
-    if model.rods or model.bodies:
-        frames = model.frames(t0, rigid)
-        ends = np.asarray(model._rigid_slots(frames, model._rod_geometry(frames))[0])
     pts = []
     for i, p in enumerate(model.points):
         if isinstance(p, FreePoint):
@@ -1496,7 +1491,6 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     gravity = any(isinstance(e, Gravity) for e in effects)
     buoyancy = any(isinstance(e, Buoyancy) for e in effects)
     g, rho = float(env.g), float(env.rho_water)
-    L = np.asarray(model.unstretched_lengths(jnp.asarray(t0, jnp.float64))[0])
     for k, ((a, b), N) in enumerate(zip(model.attach, model.segments)):
         d = float(model.d[k])
         w = (float(model.w[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
@@ -1508,6 +1502,29 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
         rows = top.tri_rows[top.body[model.line_nodes(k)[1:-1]]]
         pos[rows] = shape[1:-1]
     y = jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    if not len(top.frames.owner):
+        return y
+    return _with_rigid_rows(model, y)
+
+
+# The start's geometry in one compiled call: op by op, the motion tables'
+# interpolation alone compiled some fifty one-operation programs.
+@eqx.filter_jit
+def _start_geometry(model: LineNetwork, t0):
+    """Held points' positions, rod ends and points on bodies, unstretched
+    lengths at `t0`."""
+    top = model.topology
+    hp = model.held_kinematics(t0)[0]
+    ends = jnp.zeros((0, 3))
+    if model.rods or model.bodies:
+        rigid = model.initial_rigid_rows(jnp.zeros((top.n_state, 6)))
+        frames = model.frames(t0, rigid)
+        ends = model._rigid_slots(frames, model._rod_geometry(frames))[0]
+    return hp, ends, model.unstretched_lengths(t0)[0]
+
+
+@eqx.filter_jit
+def _with_rigid_rows(model: LineNetwork, y):
     return model.initial_rigid_rows(y)
 
 
@@ -1522,44 +1539,63 @@ def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
 def _ptc(x0, model, effects, env, t0, solve_rows, max_iter, tol, ftol):
     """Pseudo-transient continuation to a zero of the net forces: implicit Euler
     steps of x' = F(x) with a step that grows as the residual falls (a Newton
-    iteration once it is large). Returns (x, residual norm, iterations)."""
+    iteration once it is large). Returns (x, residual norm, iterations, the
+    Jacobian dF/dx at x).
+
+    Each pass of the loop evaluates the forces and their Jacobian together, once,
+    at the trial point x + dx (the Jacobian is kept where the point is accepted),
+    so that the compiled program holds one copy of the forces' Jacobian and none
+    of the forces alone; the first pass evaluates the start."""
 
     def resid(xf):
         return _equilibrium_residual(
             xf.reshape(x0.shape), model, effects, env, t0, solve_rows
         ).reshape(-1)
 
+    def resid_and_jacobian(xf):
+        J, r = jax.jacfwd(lambda z: (lambda f: (f, f))(resid(z)), has_aux=True)(xf)
+        return r, J
+
     mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
 
-    def body(c):
-        x, r, dt, it, _ = c
-        J = jax.jacfwd(resid)(x)
+    def update(r, J, dt):
         A = jnp.diag(mask / dt + (1 - mask)) - J * mask[:, None]
-        dx = jnp.linalg.solve(A, r) * mask
+        return jnp.linalg.solve(A, r) * mask
+
+    def body(c):
+        x, r, J, dt, it, _, dx, first = c
         xn = x + dx
-        rn = resid(xn)
+        rn, Jn = resid_and_jacobian(xn)
         nr, nrn = jnp.linalg.norm(r), jnp.linalg.norm(rn)
-        ok = jnp.isfinite(nrn) & (nrn < 2.0 * nr + 1e-300)
+        ok = first | (jnp.isfinite(nrn) & (nrn < 2.0 * nr + 1e-300))
         grow = jnp.clip(nr / jnp.maximum(nrn, 1e-300), 0.1, 10.0)
         dt_new = jnp.minimum(jnp.where(ok, dt * grow, dt * 0.1), 1 / _MIN_STIFFNESS)
-        step = jnp.max(jnp.abs(dx))
-        return (
-            jnp.where(ok, xn, x),
-            jnp.where(ok, rn, r),
-            dt_new,
-            it + 1,
-            jnp.where(ok, step, jnp.inf),
-        )
+        dt_new = jnp.where(first, dt, dt_new)
+        step = jnp.where(ok & ~first, jnp.max(jnp.abs(dx)), jnp.inf)
+        x = jnp.where(ok, xn, x)
+        r = jnp.where(ok, rn, r)
+        J = jnp.where(ok, Jn, J)
+        it = it + jnp.where(first, 0, 1)
+        return (x, r, J, dt_new, it, step, update(r, J, dt_new), jnp.asarray(False))
 
     def cond(c):
-        _, r, _, it, step = c
-        return (it < max_iter) & (step > tol) & (jnp.linalg.norm(r) > ftol)
+        _, r, _, _, it, step, _, first = c
+        return first | ((it < max_iter) & (step > tol) & (jnp.linalg.norm(r) > ftol))
 
     x0f = x0.reshape(-1)
-    r0 = resid(x0f)
-    init = (x0f, r0, jnp.asarray(1e-6), jnp.asarray(0), jnp.asarray(jnp.inf))
-    x, r, _, it, _ = jax.lax.while_loop(cond, body, init)
-    return x.reshape(x0.shape), jnp.linalg.norm(r), it
+    n = x0f.shape[0]
+    init = (
+        x0f,
+        jnp.zeros(n),
+        jnp.zeros((n, n)),
+        jnp.asarray(1e-6),
+        jnp.asarray(0),
+        jnp.asarray(jnp.inf),
+        jnp.zeros(n),
+        jnp.asarray(True),
+    )
+    x, r, J, _, it, _, _, _ = jax.lax.while_loop(cond, body, init)
+    return x.reshape(x0.shape), jnp.linalg.norm(r), it, J
 
 
 # The pseudo-time term 1/dt never falls below this, N/m: a slack, weightless
@@ -1567,20 +1603,14 @@ def _ptc(x0, model, effects, env, t0, solve_rows, max_iter, tol, ftol):
 _MIN_STIFFNESS = 1e-4
 
 
-def _newton_step(x, model, effects, env, t0, solve_rows):
+def _newton_step(x, J, model, effects, env, t0, solve_rows):
     """The converged `x` with the derivative of one (regularised) Newton step in
-    the parameters: the implicit-function derivative of the equilibrium."""
-    frozen = jax.lax.stop_gradient((model, effects, env))
-
-    def resid(xf, m, e, v):
-        return _equilibrium_residual(
-            xf.reshape(x.shape), m, e, v, t0, solve_rows
-        ).reshape(-1)
-
-    J = jax.jacfwd(resid)(x.reshape(-1), *frozen)
+    the parameters: the implicit-function derivative of the equilibrium. `J`: the
+    Jacobian dF/dx at `x` (the iteration's last, held constant)."""
     mask = jnp.repeat(solve_rows, 3).astype(jnp.float64)
+    J = jax.lax.stop_gradient(J)
     A = jnp.diag(mask * _MIN_STIFFNESS + (1 - mask)) - J * mask[:, None]
-    r = resid(x.reshape(-1), model, effects, env)
+    r = _equilibrium_residual(x, model, effects, env, t0, solve_rows).reshape(-1)
     dx = jnp.linalg.solve(A, r).reshape(x.shape)
     # The primal stays the converged x (the step would only amplify the residual
     # along the directions a slack line leaves free); the tangent is the step's.
@@ -1597,10 +1627,11 @@ def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
     fm, fv, _, _ = m._free_params()
     weight = v.g * (weight + jnp.sum(jnp.abs(fm - v.rho_water * fv)))
     ftol = 1e-9 * jnp.maximum(weight, 1.0)
-    x, res, it = _ptc(
+    x, res, it, J = _ptc(
         jax.lax.stop_gradient(x0), *frozen, t0, solve_rows, max_iter, tol, ftol
     )
-    x = _newton_step(jax.lax.stop_gradient(x), model, effects, env, t0, solve_rows)
+    x = jax.lax.stop_gradient(x)
+    x = _newton_step(x, J, model, effects, env, t0, solve_rows)
     return x, res, it, ftol
 
 
