@@ -139,6 +139,7 @@ def test_gauss_newton_jacobians_agree_between_forward_mode_and_sensitivities():
         assert np.all(err < 1e-4), err
 
 
+@pytest.mark.slow
 def test_an_iteration_limit_is_reported_not_raised():
     start = _scene(EA=1.4e3, alpha=0.03)
     res = js.least_squares(

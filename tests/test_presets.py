@@ -28,7 +28,9 @@ def _errors(scene, ts, ref_end):
     }
 
 
-@pytest.mark.parametrize("formulation", ["displacement", "angle"])
+@pytest.mark.parametrize(
+    "formulation", ["displacement", pytest.param("angle", marks=pytest.mark.slow)]
+)
 def test_presets_reach_their_targets_on_a_small_string(formulation):
     scene = js.string_pendulum(formulation=formulation, k=8, EA=1e6, t1=0.5)
     assert preset_system(scene.model) == formulation

@@ -214,7 +214,10 @@ def test_lockstep_failure_falls_back_to_one_solve_per_member():
         assert np.max(np.abs(res.out["end"][i] - np.asarray(ref.end_mass))) < 1e-10
 
 
-@pytest.mark.parametrize("linear_solver", ["batched_dense", "batched_banded"])
+@pytest.mark.parametrize(
+    "linear_solver",
+    [pytest.param("batched_dense", marks=pytest.mark.slow), "batched_banded"],
+)
 def test_batched_factor_equals_per_member_dense_solves(linear_solver):
     # A stacked residual of independent members, each a Newton matrix
     # I - h J(member) of a string (node-major, block-tridiagonal Jacobian):

@@ -223,6 +223,7 @@ def _peaks(ts, x):
     return np.array(out)
 
 
+@pytest.mark.slow
 def test_pendulum_period_and_amplitude():
     """MoorDyn's pendulum test: the 1e5 kg point on a 100.5 m neutrally buoyant
     line, released at rest from x = 10 m, swings with the rigid pendulum's

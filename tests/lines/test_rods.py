@@ -79,6 +79,7 @@ def test_added_mass_rod_rises():
     assert np.max(np.abs(z - expect)) < 1e-9
 
 
+@pytest.mark.slow
 def test_pinned_floating_rods_swing_up():
     """MoorDyn's pinned-floating test: after 10 s each rod's end B is above its
     pinned end A; MoorDyn's end B: (0.741795, 0, -4.329373) (its RK2, dt 1e-5)."""

@@ -401,7 +401,14 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
 
 
 @pytest.mark.parametrize("dim", (2, pytest.param(3, marks=pytest.mark.slow)))
-@pytest.mark.parametrize("a, b", [(1.0, -1e-3), (1.0, -0.1), (100.0, -1.0)])
+@pytest.mark.parametrize(
+    "a, b",
+    [
+        (1.0, -1e-3),
+        pytest.param(1.0, -0.1, marks=pytest.mark.slow),
+        pytest.param(100.0, -1.0, marks=pytest.mark.slow),
+    ],
+)
 def test_second_order_factor_equals_dense_solve(dim, a, b):
     # a I + b J as BDF (a = 1, b = -c) and Rodas5P (a = 1 / (h gamma), b = -1) form
     # it: the velocity-reduced solve must be backward stable and equal the

@@ -87,7 +87,10 @@ def _acceleration_bias(sc, y):
 MISMATCHES = [(1.2, 0.8), (0.8, 1.2), (1.2, 1.2), (0.8, 0.8)]
 
 
-@pytest.mark.parametrize("factors", MISMATCHES)
+@pytest.mark.parametrize(
+    "factors",
+    [MISMATCHES[0]] + [pytest.param(f, marks=pytest.mark.slow) for f in MISMATCHES[1:]],
+)
 def test_integral_action_meets_S4_acceptance_under_model_mismatch(factors):
     without = metrics(*run(factors))
     sc, traj = run(factors, K_I=K_I)
