@@ -224,6 +224,21 @@ def test_a_script_without_a_main_guard_is_not_run_again_by_the_workers(
         )
 
 
+@pytest.mark.parametrize("solver", ["bdf", "implicit_euler_fixed"])
+def test_sweep_programs_export_without_host_callbacks(solver):
+    # Worker processes run the exported program; JAX cannot export host callbacks
+    # (diffrax's run-time checks compile to them where the scene's span is traced).
+    from jaxstring._sweep import _sweep_local
+
+    scene = _scene()
+    config = js.SolveConfig(solver=solver, dt0=0.01, n_save=5)
+    ts = config.save_times(scene.t0, scene.t1)
+    getters = (js._fit.resolve(scene, "alpha"),)
+    args = ((ALPHAS[:2],), scene, getters, lambda traj, s: traj.end_mass, config, ts, 2)
+    key, program, leaves, outputs = _distribute.export_chunk(_sweep_local, args)
+    assert len(program) > 0 and outputs is not None
+
+
 @pytest.mark.slow
 def test_group_size_fits_the_free_memory():
     # The group chosen for a device with a given free memory: its program's planned

@@ -10,11 +10,12 @@ document as public:
    the units of the state and builds the stage Jacobian from the model's own.
 3. `RESULTS._index_to_message` and the `_value` of a result (`result_message`,
    `code_message`, `result_code`): the integer code and text of a failure.
-4. `diffeqsolve`'s run-time check of the save times (`equinox.internal.error_if`
-   with two messages of `diffrax._integrate`): jaxstring checks the save times
-   before it traces a solve, and `save_times_checked` leaves diffrax's copy of the
-   check out of the program, which otherwise compiles to a host callback that JAX
-   does not write to its persistent compilation cache.
+4. `diffeqsolve`'s run-time checks of the save times and of the step's direction
+   (`equinox.internal.error_if` with three messages of `diffrax._integrate`):
+   jaxstring checks both before it traces a solve, and `save_times_checked` leaves
+   diffrax's copies out of the program, which otherwise compile to host callbacks
+   that JAX neither writes to its persistent compilation cache nor exports to
+   worker processes.
 
 diffrax versions outside `TESTED` are refused at import with a message that names
 the installed and the tested versions, rather than failing deep inside a solve.
@@ -133,6 +134,9 @@ SAVE_TIMES_CHECKS = (
     "saveat.ts must be increasing or decreasing.",
     "saveat.ts must lie between t0 and t1.",
 )
+# ... and of the step's direction (t1 - t0) * dt0 >= 0, a host callback where t0,
+# t1 are traced (a scene's span is a leaf); jaxstring requires t1 > t0, dt0 > 0.
+DT0_CHECK = "Must have (t1 - t0) * dt0 >= 0"
 
 
 @contextlib.contextmanager
@@ -143,7 +147,7 @@ def save_times_checked():
     original = eqxi.error_if
 
     def error_if(x, pred, msg, *args, **kwargs):
-        if msg in SAVE_TIMES_CHECKS:
+        if msg in SAVE_TIMES_CHECKS or str(msg).startswith(DT0_CHECK):
             return x
         return original(x, pred, msg, *args, **kwargs)
 
