@@ -131,23 +131,12 @@ _BODY_KINDS = {
     "CPLDPIN": "coupled_pinned",
     "COUPLEDPINNED": "coupled_pinned",
 }
-_ROD_KINDS = {
-    "FIXED": "fixed",
-    "FIX": "fixed",
-    "ANCHOR": "fixed",
+# A rod takes a body's kinds and can also be pinned or free like a point.
+_ROD_KINDS = _BODY_KINDS | {
     "PINNED": "pinned",
     "PIN": "pinned",
-    "FREE": "free",
     "POINT": "free",
     "CON": "free",
-    "VESSEL": "coupled",
-    "VES": "coupled",
-    "COUPLED": "coupled",
-    "CPLD": "coupled",
-    "VESSELPINNED": "coupled_pinned",
-    "VESPIN": "coupled_pinned",
-    "CPLDPIN": "coupled_pinned",
-    "COUPLEDPINNED": "coupled_pinned",
 }
 
 # Options read into the scene: deck name (lower case) -> key.
