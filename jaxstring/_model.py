@@ -27,6 +27,10 @@ class SolverStructure(eqx.Module):
       instead of keeping one across steps, for the same reason.
     - `jacobian`: the model's `vf_jacobian` gives the exact Jacobian (cheaper than
       coloured JVPs).
+    - `border`: k > 0 when the first k node rows couple to every row (a vessel
+      holding lines) and the other rows form a band of node width `bandwidth`
+      (`second_order` then describes those rows): the Newton matrices are
+      factorised by the band's Schur complement (`jaxstring._linalg`).
     """
 
     bandwidth: int | None = eqx.field(static=True, default=None)
@@ -34,6 +38,7 @@ class SolverStructure(eqx.Module):
     stage_jacobians: bool = eqx.field(static=True, default=False)
     step_jacobians: bool = eqx.field(static=True, default=False)
     jacobian: bool = eqx.field(static=True, default=False)
+    border: int = eqx.field(static=True, default=0)
 
 
 class AbstractModel(eqx.Module):

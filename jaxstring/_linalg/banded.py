@@ -27,11 +27,16 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   ``[[a I, b I], [P, Q]]`` is reduced to the velocity unknowns,
   ``S = Q - (b / a) P``: blocks of half the size, 8x fewer block flops and a
   closed-form 2 x 2 inverse in 2D.
+* ``BorderedJacobian``: a band with a few leading rows (``border``) coupled to
+  every node (a vessel holding the lines of its mooring): the band is factorised
+  as above and the border by its Schur complement, from 3 B JVPs for the band
+  and ``border b`` JVPs and transposed JVPs for the border's columns and rows.
 * ``NewtonFactor``: one interface (``build(fn, y, structure)`` and ``.solve``)
   over the dense and the banded paths, used by the stage Newton iteration, the
   Rosenbrock, BDF, theta and Newmark solvers.
 """
 
+import dataclasses
 import math
 
 import diffrax as dfx
@@ -181,8 +186,18 @@ def _declared_scene(fn, y, args):
     return scenes[0]
 
 
+@dataclasses.dataclass(frozen=True)
+class BorderedWidth:
+    """The structure of a state whose first `border` rows couple to every row and
+    whose other rows form a band of node width `width` (`BorderedJacobian`)."""
+
+    width: int
+    border: int
+
+
 def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
-    """Return the node bandwidth to use (int) or None for the dense path.
+    """Return the node bandwidth to use (int), a `BorderedWidth` (a model that
+    declares `SolverStructure.border`), or None for the dense path.
 
     `linear_solver`: "dense", "banded" (raises if no band is found) or "auto"
     (banded for large enough systems with a narrow band). The band is the one the
@@ -191,6 +206,10 @@ def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
     """
     if linear_solver == "dense":
         return None
+    scene = _declared_scene(fn, y, args)
+    border = 0 if scene is None else int(scene.structure.border)
+    if border:
+        return BorderedWidth(int(scene.structure.bandwidth), border)
     width = declared_width(fn, y, args)
     if width is None:
         width = detect_width(fn, y, args)
@@ -668,13 +687,21 @@ def jacobian(fn, y, width, linear_fn=None, second_order=0):
         flat, unravel = jfu.ravel_pytree(y)
         f_flat = lambda v: jfu.ravel_pytree(fn(unravel(v)))[0]
         return DenseJacobian(jax.jacfwd(f_flat)(flat))
+    if isinstance(width, BorderedWidth):
+        return bordered_jacobian(fn, y, width, linear_fn, second_order)
     return block_tridiagonal_jacobian(fn, y, width, linear_fn, second_order)
 
 
 @jax.jit
 def factor(mat):
-    """Factorise a `DenseJacobian`-like, `BlockTridiagonal` or
-    `SecondOrderJacobian` matrix."""
+    """Factorise a `DenseJacobian`-like, `BlockTridiagonal`, `SecondOrderJacobian`
+    or `BorderedJacobian` matrix."""
+    return _factor(mat)
+
+
+def _factor(mat):
+    if isinstance(mat, BorderedJacobian):
+        return _bordered_factor(mat)
     if isinstance(mat, SecondOrderJacobian):
         return _second_order_jacobian_factor(mat)
     if isinstance(mat, BlockTridiagonal):
@@ -684,3 +711,88 @@ def factor(mat):
         return BandedFactor(bcr_factor(mat), mat.n, mat.b, N, B)
     lu, piv = jsl.lu_factor(mat.matrix)
     return DenseFactor(lu, piv)
+
+
+# ----------------------------------------------------------------------------
+# A band with a border: a few rows and columns coupled to everything
+# ----------------------------------------------------------------------------
+
+
+class BorderedJacobian(eqx.Module):
+    """`[[A, R], [C, D]]` for a node-major `(n, b)` state whose first `k` rows
+    (the border) couple to every row: `A` `(k b, k b)`, `R` `(k b, m)`, `C`
+    `(m, k b)` and the band `D`, a `BlockTridiagonal` of the other `n - k` rows
+    (m = (n - k) b)."""
+
+    A: Array
+    R: Array
+    C: Array
+    band: BlockTridiagonal
+    k: int = eqx.field(static=True)
+
+    def scale_shift(self, alpha, beta):
+        """alpha I + beta self."""
+        eye = jnp.eye(self.A.shape[0], dtype=self.A.dtype)
+        return BorderedJacobian(
+            alpha * eye + beta * self.A,
+            beta * self.R,
+            beta * self.C,
+            self.band.scale_shift(alpha, beta),
+            self.k,
+        )
+
+    def to_dense(self):
+        return jnp.block([[self.A, self.R], [self.C, self.band.to_dense()]])
+
+
+def bordered_jacobian(fn, y, spec: BorderedWidth, linear_fn=None, second_order=0):
+    """The Jacobian of `fn` at `y` (node-major `(n, b)`) as a `BorderedJacobian`:
+    the band of the rows after the border from 3 B JVPs (`block_tridiagonal_jacobian`
+    with the border held), the border's columns from `k b` JVPs and its rows from
+    `k b` transposed JVPs."""
+    k = spec.border
+    n, b = y.shape
+    if linear_fn is None:
+        _, linear_fn = jax.linearize(fn, y)
+    zb = jnp.zeros((k, b), y.dtype)
+    lin_band = lambda v: linear_fn(jnp.concatenate([zb, v]))[k:]
+    band = block_tridiagonal_jacobian(None, y[k:], spec.width, lin_band, second_order)
+    kb = k * b
+    seeds = (
+        jnp.zeros((kb, n, b), y.dtype)
+        .at[:, :k]
+        .set(jnp.eye(kb, dtype=y.dtype).reshape(kb, k, b))
+    )
+    cols = jax.vmap(linear_fn)(seeds).reshape(kb, n * b)  # cols[c] = J e_c
+    transpose = jax.linear_transpose(linear_fn, y)
+    rows = jax.vmap(lambda s: transpose(s)[0])(seeds).reshape(kb, n * b)
+    return BorderedJacobian(cols[:, :kb].T, rows[:, kb:], cols[:, kb:].T, band, k)
+
+
+class BorderedFactor(eqx.Module):
+    """The factorisation of a `BorderedJacobian`: the band's factor, `X = D^-1 C`
+    and the LU of the Schur complement `A - R X`."""
+
+    band: eqx.Module
+    X: Array
+    R: Array
+    lu: Array
+    piv: Array
+    k: int = eqx.field(static=True)
+
+    def solve(self, rhs):
+        k = self.k
+        b = rhs.shape[1]
+        rb, rl = rhs[:k].reshape(-1), rhs[k:]
+        z = self.band.solve(rl).reshape(-1)
+        xb = jsl.lu_solve((self.lu, self.piv), rb - self.R @ z)
+        xl = z - self.X @ xb
+        return jnp.concatenate([xb.reshape(k, b), xl.reshape(-1, b)])
+
+
+def _bordered_factor(mat: BorderedJacobian) -> BorderedFactor:
+    band = _factor(mat.band)
+    m, b = mat.C.shape[0], mat.band.b
+    X = jax.vmap(lambda c: band.solve(c.reshape(m // b, b)).reshape(-1), 1, 1)(mat.C)
+    lu, piv = jsl.lu_factor(mat.A - mat.R @ X)
+    return BorderedFactor(band, X, mat.R, lu, piv, mat.k)

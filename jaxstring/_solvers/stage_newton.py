@@ -438,6 +438,8 @@ def batched_factor(fn, y, args, linear_solver: str = "batched"):
     M = y.shape[0]
     member = _Member(fn, tuple(y.shape))
     width = _linalg.choose_structure(member, y[0], args, inner)
+    if isinstance(width, _linalg.BorderedWidth):
+        width = None  # members of a bordered structure: dense blocks
     _, lin = jax.linearize(lambda u: fn(u, args), y)
     if width is None:
         m = math.prod(y.shape[1:])

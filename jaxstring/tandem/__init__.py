@@ -3,9 +3,10 @@ current, wind, turret mooring and hawser loads, equilibria and their stability,
 fishtailing limit cycles, and the autopilots that keep the vessels apart.
 
 Hulls, loads and the `Tandem` model in `vessels`, autopilots in `autopilot`, the
-hawser as a lumped-mass line in `line`, the turret on a MoorDyn deck's catenary
-lines in `turret`, equilibria and limit cycles in `analysis`,
-the spec's scenes in `scenes`, figures in `plot` (imported on demand: matplotlib).
+hawser as a lumped-mass line in `line`, the turret on a MoorDyn deck's lines in
+`turret` (quasi-static catenaries, or lumped masses integrated with the vessels),
+equilibria and limit cycles in `analysis`, the spec's scenes in `scenes`, figures
+in `plot` (imported on demand: matplotlib).
 """
 
 from .analysis import (
@@ -41,9 +42,11 @@ from .scenes import (
     with_model_mismatch as with_model_mismatch,
 )
 from .turret import (
+    MooredVessels as MooredVessels,
     TurretLines as TurretLines,
     offset_force_curve as offset_force_curve,
     turret_lines as turret_lines,
+    with_dynamic_mooring as with_dynamic_mooring,
 )
 from .vessels import (
     HAWSER_K_H as HAWSER_K_H,
@@ -90,9 +93,11 @@ __all__ = [
     "tandem_hopf",
     "turret_mooring",
     "with_model_mismatch",
+    "MooredVessels",
     "TurretLines",
     "offset_force_curve",
     "turret_lines",
+    "with_dynamic_mooring",
     "AbstractActuator",
     "AbstractVesselLoad",
     "ConstantThrust",

@@ -16,7 +16,7 @@ from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
 from .line import HAWSER_KINDS, LINE_OPTIONS, with_line
-from .turret import TurretLines, turret_lines
+from .turret import TurretLines, turret_lines, with_dynamic_mooring
 from .vessels import (
     HAWSER_K_H,
     HAWSER_L0,
@@ -127,7 +127,7 @@ def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     return jnp.concatenate([p1, h, z, p2, h, z])
 
 
-MOORINGS = ("spring", "lines")
+MOORINGS = ("spring", "lines", "dynamic")
 
 
 def turret_mooring(mooring=None, k_m=1.0e5, c_m=6.0e5):
@@ -135,12 +135,13 @@ def turret_mooring(mooring=None, k_m=1.0e5, c_m=6.0e5):
     spec's hardening spring, `TurretMooring(k_m, c_m)`), "lines" (the packaged
     deck's catenary lines, `turret_lines()`, damping `c_m`), a path of a MoorDyn
     deck (its lines on the turret), or a `TurretMooring` / `TurretLines` (as
-    it is)."""
+    it is). "dynamic": the quasi-static lines, from which a scene builder starts
+    before it integrates the lines with the vessels (`_dynamic`)."""
     if isinstance(mooring, (TurretMooring, TurretLines)):
         return mooring
     if mooring is None or mooring == "spring":
         return TurretMooring(k_m=k_m, c_m=c_m)
-    if mooring == "lines":
+    if mooring in ("lines", "dynamic"):
         return turret_lines(c_m=c_m)
     if isinstance(mooring, (str, os.PathLike)) and os.path.isfile(mooring):
         return turret_lines(mooring, c_m=c_m)
@@ -148,6 +149,27 @@ def turret_mooring(mooring=None, k_m=1.0e5, c_m=6.0e5):
         f"`mooring` must be one of {MOORINGS}, the path of a MoorDyn deck, a "
         f"TurretMooring or a TurretLines; got {mooring!r}."
     )
+
+
+def _dynamic(scene, mooring):
+    """`scene` with the packaged deck's lines integrated with the vessels
+    (`with_dynamic_mooring`) when `mooring` is "dynamic", else as it is."""
+    if isinstance(mooring, str) and mooring == "dynamic":
+        return with_dynamic_mooring(scene)
+    return scene
+
+
+def _check_dynamic(mooring, **refused):
+    """Refuse `mooring="dynamic"` with the options in `refused` that are set
+    (name -> (value, True where it is refused))."""
+    if not (isinstance(mooring, str) and mooring == "dynamic"):
+        return
+    for name, (value, bad) in refused.items():
+        if bad:
+            raise ValueError(
+                f"`mooring='dynamic'` integrates the lines with a Tandem or a "
+                f"MooredFPSO; it does not combine with `{name}`={value!r}."
+            )
 
 
 def _perturb_shuttle_heading(model, y, angle):
@@ -173,7 +195,8 @@ def tandem_fpso_alone(
     Starts from the heading-into-current equilibrium turned by `psi0_deg` about
     the turret; forward of the critical turret position (0.355 L1) it returns.
     `mooring`: the turret's mooring (`turret_mooring`; default the spec's spring
-    of `k_m`, `c_m`; "lines": the packaged deck's catenary lines).
+    of `k_m`, `c_m`; "lines": the packaged deck's catenary lines, quasi-static;
+    "dynamic": those lines integrated with the FPSO, `with_dynamic_mooring`).
     """
     check_positive("U_c", U_c, "m/s")
     check_finite("psi0_deg", psi0_deg)
@@ -192,9 +215,10 @@ def tandem_fpso_alone(
     PT = y[:2] + model.x_t * jnp.array([1.0, 0.0])
     y = y.at[:2].set(PT - model.x_t * jnp.array([math.cos(a), math.sin(a)]))
     y = y.at[2].set(a)
-    return Scene(
+    sc = Scene(
         model=model, effects=effects, y0=y, t1=t1, name="tandem-fpso-alone", env=env
     )
+    return _dynamic(sc, mooring)
 
 
 def _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, F_ast, hawser=None, mooring=None):
@@ -220,7 +244,14 @@ def tandem_equilibria(
     state (exact equilibrium for the current alone or wind along it, with the
     spring or a mooring pattern symmetric about the heading). Use
     `find_equilibria(scene)` for all equilibria. `mooring`: the turret's
-    (`turret_mooring`: default the spec's spring; "lines": catenary lines)."""
+    (`turret_mooring`: default the spec's spring; "lines": catenary lines,
+    quasi-static: the equilibria and their stability are the vessels')."""
+    if isinstance(mooring, str) and mooring == "dynamic":
+        raise ValueError(
+            "`mooring` for the equilibria scene must be 'spring', 'lines', a deck "
+            "or an effect (the equilibria and their stability are the vessels' on "
+            "quasi-static lines); got 'dynamic'."
+        )
     model = tandem_model(x_t=x_t)
     eff, env = _tandem_effects(U_c, V_w, Delta_w_deg, l0, k_h, None, mooring=mooring)
     y0 = aligned_equilibrium(model, eff, env)
@@ -272,7 +303,8 @@ def tandem_fishtail(
     """S3a: current only, constant astern pull `F_ast` (N), from the aligned
     equilibrium with the shuttle turned by `perturbation_deg` about its bow.
     `mooring`: the turret's (`turret_mooring`: default the spec's spring;
-    "lines": the packaged deck's catenary lines).
+    "lines": the packaged deck's catenary lines, quasi-static; "dynamic": those
+    lines integrated with the vessels, `with_dynamic_mooring`).
 
     `hawser="line"` replaces the massless hawser by a line with mass and drag
     (`with_line`; `line_options`: its keyword arguments, e.g. `N`,
@@ -282,12 +314,13 @@ def tandem_fishtail(
     check_finite("perturbation_deg", perturbation_deg)
     check_positive("U_c", U_c, "m/s")
     _check_hawser(hawser, line_options)
+    _check_dynamic(mooring, hawser=(hawser, hawser != "massless"))
     model = tandem_model()
     eff, env = _tandem_effects(U_c, 0.0, 0.0, l0, k_h, F_ast, mooring=mooring)
     y0 = aligned_equilibrium(model, eff, env, F_ast=F_ast)
     y0 = _perturb_shuttle_heading(model, y0, math.radians(perturbation_deg))
     sc = Scene(model=model, effects=eff, y0=y0, t1=t1, name="tandem-fishtail", env=env)
-    return _hawser_kind(sc, hawser, line_options)
+    return _dynamic(_hawser_kind(sc, hawser, line_options), mooring)
 
 
 def tandem_hopf(
@@ -352,7 +385,10 @@ def tandem_controlled(
     omega^3/10. None: no integral action.
 
     `mooring`: the FPSO's turret mooring (`turret_mooring`: default the spec's
-    spring; "lines": the packaged deck's catenary lines)."""
+    spring; "lines": the packaged deck's catenary lines, quasi-static; "dynamic":
+    those lines integrated with the vessels, `with_dynamic_mooring`, with the
+    massless hawser and no integral action; the controller's model then has no
+    mooring force, which it rejects as a disturbance)."""
     check_choice("env", env, tuple(ENVIRONMENTS))
     check_choice("law", law, ("A", "B"))
     if K_I is not None and (law != "B" or hawser != "massless"):
@@ -367,6 +403,9 @@ def tandem_controlled(
     check_finite("shuttle_offset_deg", shuttle_offset_deg)
     V_w, Dw = ENVIRONMENTS[env]
     _check_hawser(hawser, line_options)
+    _check_dynamic(
+        mooring, hawser=(hawser, hawser != "massless"), K_I=(K_I, K_I is not None)
+    )
     model = tandem_model()
     spec_hawser = Hawser()
     d_ref = spec_hawser.l0 + spec_hawser.stretch_for_tension(T_ref)
@@ -384,7 +423,7 @@ def tandem_controlled(
     sc = Scene(
         model=model, effects=eff, y0=y0, t1=t1, name="tandem-controlled", env=env_
     )
-    return _hawser_kind(sc, hawser, line_options)
+    return _dynamic(_hawser_kind(sc, hawser, line_options), mooring)
 
 
 def with_model_mismatch(scene, C_Y_factor=1.2, wind_area_factor=0.8) -> Scene:

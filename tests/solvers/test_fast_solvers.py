@@ -665,3 +665,40 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     assert (
         _stage_model_jacobian(angle.y0, args[:5] + (angle.y0, angle, args[7])) is None
     )
+
+
+@pytest.mark.parametrize("second_order", [0, 3])
+def test_bordered_jacobian_and_solve_equal_dense(second_order):
+    # A vessel row (the border) coupled to two chains of springs at scattered rows,
+    # the chains' rows (q, v) banded with width 1: the bordered Jacobian equals
+    # jacfwd and its Schur-complement solve equals the dense solve.
+    rng = np.random.default_rng(7)
+    n, k = 9, 1
+    K = jnp.asarray(rng.uniform(1.0, 3.0, n - k))
+    hook = np.zeros(n - k)
+    hook[[0, 5]] = 1.0  # the border pulls these nodes
+    hook = jnp.asarray(hook)
+
+    def fn(y):
+        vb, q, v = y[:k], y[k:, :3], y[k:, 3:]
+        qp = jnp.concatenate([q[:1], q[:-1]])
+        qn = jnp.concatenate([q[1:], q[-1:]])
+        a = K[:, None] * (qp - 2 * q + qn) + hook[:, None] * (vb[0, :3] - q) ** 3
+        dv = a - 0.1 * v
+        db = jnp.concatenate([vb[0, 3:], -jnp.sum(hook[:, None] * (vb[0, :3] - q), 0)])
+        return jnp.concatenate([db[None], jnp.concatenate([v, dv], axis=1)])
+
+    y = jnp.asarray(rng.standard_normal((n, 6)))
+    spec = _linalg.BorderedWidth(width=1, border=k)
+    mat = _linalg.jacobian(fn, y, spec, second_order=second_order)
+    assert isinstance(mat, _linalg.BorderedJacobian)
+    J = np.asarray(
+        jax.jacfwd(lambda u: fn(u.reshape(y.shape)).reshape(-1))(y.reshape(-1))
+    )
+    np.testing.assert_allclose(np.asarray(mat.to_dense()), J, atol=1e-13)
+    for a, b in ((1.0, -0.05), (20.0, -1.0)):
+        fac = _linalg.factor(mat.scale_shift(a, b))
+        rhs = rng.standard_normal(y.shape)
+        x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+        dense = np.linalg.solve(a * np.eye(y.size) + b * J, rhs.reshape(-1))
+        np.testing.assert_allclose(x, dense, rtol=1e-11, atol=1e-12)
