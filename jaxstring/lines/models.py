@@ -81,6 +81,32 @@ from .rigid import (
 from .rods import Rod, RodEnd, rod_loads
 
 
+def submerged_fraction(z_a, z_b, qs, radius):
+    """Submerged fraction of each segment under the still-water surface z = 0
+    (MoorDyn's `Line::calcSubSeg`), `(S,)`: 1 with both nodes below it, 0 with
+    both above, and for a segment across it the part below the surface of the
+    diagonal from the lower end's bottom to the upper end's top,
+
+        F = (r sin(phi) - z_min) / (z_max - z_min + 2 r sin(phi)),
+
+    with phi the segment's angle from the vertical and r its radius: a
+    horizontal segment of diameter d whose axis lies on the surface is half
+    submerged. Like MoorDyn's, F jumps (by up to r sin(phi) / (z_max + 2 r
+    sin(phi))) when a node of a thick, inclined segment crosses the surface.
+
+    **Arguments:** the node heights `z_a`, `z_b` `(S,)`, m; the unit segment
+    directions `qs` `(S, 3)`; the segment radii `radius` `(S,)`, m.
+    """
+    zmin, zmax = jnp.minimum(z_a, z_b), jnp.maximum(z_a, z_b)
+    # r sin(phi): the radius' vertical reach at the segment's ends
+    reach = radius * safe_norm(qs[:, :2])
+    den = zmax - zmin + 2.0 * reach
+    # a segment lying flat on the surface (zero span and no radius): half, as
+    # MoorDyn's
+    frac = jnp.where(den > 0, (reach - zmin) / jnp.where(den > 0, den, 1.0), 0.5)
+    return jnp.where(zmax < 0, 1.0, jnp.where(zmin > 0, 0.0, frac))
+
+
 def _none_or_f64(x):
     return None if x is None else jnp.asarray(x, jnp.float64)
 
@@ -907,12 +933,7 @@ class LineNetwork(AbstractModel):
         M = top.body.shape[0]
         seg_f = T[:, None] * qs
         node_f = jnp.zeros((M, 3)).at[lo].add(seg_f).at[hi].add(-seg_f)
-        # Submerged fraction of each segment (the still-water surface is z = 0).
-        zlo, zhi = R[lo, 2], R[hi, 2]
-        zmin, zmax = jnp.minimum(zlo, zhi), jnp.maximum(zlo, zhi)
-        cross = (zmax > 0) & (zmin < 0)
-        frac = -zmin / jnp.where(cross, zmax - zmin, 1.0)
-        F = jnp.where(zmax <= 0, 1.0, jnp.where(zmin >= 0, 0.0, frac))
+        F = submerged_fraction(R[lo, 2], R[hi, 2], qs, 0.5 * self.d[sl])
         half = 0.5 * l
         length = jnp.zeros(M).at[lo].add(half).at[hi].add(half)
         sub = jnp.zeros(M).at[lo].add(half * F).at[hi].add(half * F)
