@@ -85,6 +85,12 @@ def check_shape(name: str, value, shape: tuple, unit: str = "") -> None:
         )
 
 
+def check_shape_finite(name: str, value, shape: tuple, unit: str = "") -> None:
+    """`value` has exactly `shape` (`check_shape`) and is finite (`check_finite`)."""
+    check_shape(name, value, shape, unit)
+    check_finite(name, value)
+
+
 def check_int(name: str, value, minimum: int) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"`{name}` must be an integer >= {minimum}; got {value!r}.")

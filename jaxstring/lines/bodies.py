@@ -25,16 +25,14 @@ state. `skew(a)` is the matrix with `skew(a) @ b = cross(a, b)` (MoorDyn's
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import f64, param as _param
 from .._validate import (
     check_choice,
-    check_finite,
     check_nonnegative,
+    check_shape_finite,
     is_concrete,
-    show,
 )
 
 
@@ -122,7 +120,7 @@ class Body(eqx.Module):
             ("CdA", (6,), ""),
             ("Ca", (3,), ""),
         ):
-            _check_field(field + who, getattr(self, field), shape, unit)
+            check_shape_finite(field + who, getattr(self, field), shape, unit)
         for field, unit in (
             ("mass", "kg"),
             ("volume", "m^3"),
@@ -148,17 +146,6 @@ class Body(eqx.Module):
     def matrix(self) -> Float[Array, "3 3"]:
         """The body-to-global rotation matrix of `rotation`."""
         return rotation_matrix(self.rotation)
-
-
-def _check_field(name, value, shape, unit):
-    got = np.shape(value)
-    if tuple(got) != tuple(shape):
-        what = "a scalar" if shape == () else f"of shape {tuple(shape)}"
-        u = f" ({unit})" if unit else ""
-        raise ValueError(
-            f"`{name}` must be {what}{u}; got shape {tuple(got)}: {show(value)}."
-        )
-    check_finite(name, value)
 
 
 # ---------------------------------------------------------------------------

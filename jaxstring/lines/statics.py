@@ -73,10 +73,10 @@ from jaxtyping import Array, Bool, Float, Int
 from .._arrays import f64, param as _param
 from .._validate import (
     check_choice,
-    check_finite,
     check_int,
     check_nonnegative,
     check_positive,
+    check_shape_finite,
     is_concrete,
     show,
 )
@@ -142,9 +142,9 @@ class MooringPoint(eqx.Module):
 
     def __check_init__(self):
         check_choice("point kind", self.kind, POINT_KINDS)
-        _check_shape_finite(f"position of {self.name}", self.position, (3,), "m")
+        check_shape_finite(f"position of {self.name}", self.position, (3,), "m")
         for field, unit in (("mass", "kg"), ("volume", "m^3")):
-            _check_shape_finite(
+            check_shape_finite(
                 f"{field} of {self.name}", getattr(self, field), (), unit
             )
             check_nonnegative(f"{field} of {self.name}", getattr(self, field), unit)
@@ -153,17 +153,6 @@ class MooringPoint(eqx.Module):
                 f"`body` of {self.name} must be the index (>= 0) of a body exactly "
                 f"when its kind is 'body'; got kind {self.kind!r}, body {self.body!r}."
             )
-
-
-def _check_shape_finite(name, value, shape, unit=""):
-    got = np.shape(value)
-    if tuple(got) != tuple(shape):
-        what = "a scalar" if shape == () else f"of shape {tuple(shape)}"
-        u = f" ({unit})" if unit else ""
-        raise ValueError(
-            f"`{name}` must be {what}{u}; got shape {tuple(got)}: {show(value)}."
-        )
-    check_finite(name, value)
 
 
 class _Layout(NamedTuple):
@@ -325,7 +314,7 @@ class MooringSystem(eqx.Module):
             v = f64(v)
             if v.ndim == 0:
                 v = jnp.broadcast_to(v, (n,))
-            _check_shape_finite(name, v, (n,), unit)
+            check_shape_finite(name, v, (n,), unit)
             arrays[name] = v
         for name in ("L", "w", "EA"):
             check_positive(name, arrays[name], {"L": "m", "w": "kg/m", "EA": "N"}[name])
@@ -339,15 +328,13 @@ class MooringSystem(eqx.Module):
         nb = len(bodies)
         if hydrostatics is not None:
             hydrostatics = f64(hydrostatics)
-            _check_shape_finite(
-                "hydrostatics", hydrostatics, (nb, 6, 6), "N/m, N m/rad"
-            )
+            check_shape_finite("hydrostatics", hydrostatics, (nb, 6, 6), "N/m, N m/rad")
             if hydrostatic_pose is None:
                 hydrostatic_pose = jnp.stack(
                     [jnp.concatenate([b.position, b.rotation]) for b in bodies]
                 ).reshape(nb, 6)
             hydrostatic_pose = f64(hydrostatic_pose)
-            _check_shape_finite("hydrostatic_pose", hydrostatic_pose, (nb, 6), "m, rad")
+            check_shape_finite("hydrostatic_pose", hydrostatic_pose, (nb, 6), "m, rad")
         elif hydrostatic_pose is not None:
             raise ValueError("`hydrostatic_pose` needs `hydrostatics`; got None.")
         # which end of each line is its anchor on the seabed (static)
@@ -700,8 +687,8 @@ def _check_loads(system, loads):
     if not isinstance(loads, MooringLoads):
         loads = system.loads(body=loads)
     nb, npt = len(system.bodies), len(system.points)
-    _check_shape_finite("loads.body", loads.body, (nb, 6), "N, N m")
-    _check_shape_finite("loads.point", loads.point, (npt, 3), "N")
+    check_shape_finite("loads.body", loads.body, (nb, 6), "N, N m")
+    check_shape_finite("loads.point", loads.point, (npt, 3), "N")
     return loads
 
 
@@ -709,7 +696,7 @@ def _check_vector(name, value, n, unit):
     if value is None:
         return np.zeros((n,))
     value = f64(value)
-    _check_shape_finite(name, value, (n,), unit)
+    check_shape_finite(name, value, (n,), unit)
     return value
 
 
