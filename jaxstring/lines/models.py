@@ -49,6 +49,7 @@ from .._validate import (
     check_nonnegative,
     check_positive,
     check_shape,
+    check_shape_finite,
 )
 from ..chain import (
     AbstractChainLoad,
@@ -111,7 +112,25 @@ def _none_or_f64(x):
     return None if x is None else jnp.asarray(x, jnp.float64)
 
 
-class FreePoint(eqx.Module):
+class _AbstractPoint(eqx.Module):
+    """A point with its own mass, volume and drag (`FreePoint`, `BodyPoint`): the
+    checks they share."""
+
+    position: eqx.AbstractVar[Float[Array, "3"]]
+    mass: eqx.AbstractVar[Float[Array, ""]]
+    volume: eqx.AbstractVar[Float[Array, ""]]
+    CdA: eqx.AbstractVar[Float[Array, ""]]
+    Ca: eqx.AbstractVar[Float[Array, ""]]
+
+    def __check_init__(self):
+        check_shape_finite("position", self.position, (3,), "m")
+        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
+            check_shape(name, getattr(self, name), (), u)
+            check_nonnegative(name, getattr(self, name), u)
+        check_nonnegative("Ca", self.Ca)
+
+
+class FreePoint(_AbstractPoint):
     """A free point (a clump weight, a buoy, a pendulum's bob).
 
     **Arguments:** `position` (its initial position, `(3,)`, m), `mass` (kg),
@@ -125,16 +144,8 @@ class FreePoint(eqx.Module):
     CdA: Float[Array, ""] = _param(default=0.0)
     Ca: Float[Array, ""] = _param(default=0.0)
 
-    def __check_init__(self):
-        check_shape("position", self.position, (3,), "m")
-        check_finite("position", self.position)
-        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
-            check_shape(name, getattr(self, name), (), u)
-            check_nonnegative(name, getattr(self, name), u)
-        check_nonnegative("Ca", self.Ca)
 
-
-class BodyPoint(eqx.Module):
+class BodyPoint(_AbstractPoint):
     """A point fixed on a body (MoorDyn's `Body<n>` point): it moves with the
     body, and its own loads and the lines on it load the body.
 
@@ -151,18 +162,13 @@ class BodyPoint(eqx.Module):
     Ca: Float[Array, ""] = _param(default=0.0)
 
     def __check_init__(self):
+        # runs before `_AbstractPoint`'s checks (equinox: in method resolution order)
         if (
             isinstance(self.body, bool)
             or not isinstance(self.body, int)
             or (self.body < 0)
         ):
             raise ValueError(f"`body` must be an integer >= 0; got {self.body!r}.")
-        check_shape("position", self.position, (3,), "m")
-        check_finite("position", self.position)
-        for name, u in (("mass", "kg"), ("volume", "m^3"), ("CdA", "m^2")):
-            check_shape(name, getattr(self, name), (), u)
-            check_nonnegative(name, getattr(self, name), u)
-        check_nonnegative("Ca", self.Ca)
 
 
 _LINE_PARAMS = ("L", "d", "w", "EA", "BA", "Cd", "Ca", "CdAx", "CaAx")
