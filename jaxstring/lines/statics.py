@@ -713,6 +713,28 @@ def _check_options(current, tol, max_iter, max_step):
     check_positive("max_step", max_step, "m")
 
 
+def _checked(
+    system, loads, offsets, guess, current, tol, max_iter, max_step, throw, stiffness
+):
+    """The checked arguments of `mooring_equilibrium` (`stiffness` False) or
+    `coupled_stiffness` (True): `(system, loads, offsets, guess)` as strongly
+    typed arrays, and the solve's `_Cfg`."""
+    _check_system(system)
+    loads = _check_loads(system, loads)
+    _check_options(current, tol, max_iter, max_step)
+    if stiffness and system.n_coupled == 0:
+        raise ValueError(
+            "`system` has no coupled degree of freedom (no coupled or pinned body, no "
+            "coupled point): its coupled stiffness is empty."
+        )
+    offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
+    guess = _check_vector("guess", guess, system.n_free, "m, rad")
+    cfg = _Cfg(
+        float(tol), int(max_iter), float(max_step), 1e-12, stiffness, bool(throw)
+    )
+    return _strong((system, loads, offsets, guess)), cfg
+
+
 def _moved(system: MooringSystem, u) -> MooringSystem:
     """The system with its coupled bodies and points moved by the offsets `u`
     (translations, and rotation vectors applied in global axes)."""
@@ -1123,13 +1145,10 @@ def mooring_equilibrium(
     **Raises:** `ValueError` for bad input (before anything compiles), naming the
     argument, its value and the valid range.
     """
-    _check_system(system)
-    loads = _check_loads(system, loads)
-    _check_options(current, tol, max_iter, max_step)
-    offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
-    guess = _check_vector("guess", guess, system.n_free, "m, rad")
-    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, False, bool(throw))
-    return _equilibrium(*_strong((system, loads, offsets, guess)), cfg)
+    args, cfg = _checked(
+        system, loads, offsets, guess, current, tol, max_iter, max_step, throw, False
+    )
+    return _equilibrium(*args, cfg)
 
 
 def _throw(out):
@@ -1175,18 +1194,10 @@ def coupled_stiffness(
     **Returns:** `(K, equilibrium)`: `K` of shape (n_coupled, n_coupled) in N/m,
     N/rad, N m/m, N m/rad, and the `MooringEquilibrium`.
     """
-    _check_system(system)
-    loads = _check_loads(system, loads)
-    _check_options(current, tol, max_iter, max_step)
-    if system.n_coupled == 0:
-        raise ValueError(
-            "`system` has no coupled degree of freedom (no coupled or pinned body, no "
-            "coupled point): its coupled stiffness is empty."
-        )
-    offsets = _check_vector("offsets", offsets, system.n_coupled, "m, rad")
-    guess = _check_vector("guess", guess, system.n_free, "m, rad")
-    cfg = _Cfg(float(tol), int(max_iter), float(max_step), 1e-12, True, bool(throw))
-    return _stiffness(*_strong((system, loads, offsets, guess)), cfg)
+    args, cfg = _checked(
+        system, loads, offsets, guess, current, tol, max_iter, max_step, throw, True
+    )
+    return _stiffness(*args, cfg)
 
 
 # ---------------------------------------------------------------------------
