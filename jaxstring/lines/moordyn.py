@@ -500,14 +500,20 @@ def _body_ref(where, fields, i, parts, bodies, what):
             i, fields, f"column {i + 1} ({what}) {fields[i]!r}: 'Body' needs a number"
         )
     n = int(parts[1])
-    if not 1 <= n <= len(bodies):
+    _check_id(where, fields, i, what, n, "body", "BODIES", len(bodies))
+    return n
+
+
+def _check_id(where, fields, i, what, n, kind, section, count):
+    """Refuse the `kind` ID `n` named in column `i` (`what`) unless it is one of
+    the `count` in `section` (1..count)."""
+    if not 1 <= n <= count:
         raise where.error(
             i,
             fields,
-            f"column {i + 1} ({what}) {fields[i]!r}: body {n} is not in BODIES "
-            f"(valid: 1..{len(bodies)})",
+            f"column {i + 1} ({what}) {fields[i]!r}: {kind} {n} is not in {section} "
+            f"(valid: 1..{count})",
         )
-    return n
 
 
 def _rod_row(where, fields, expected, rod_types, bodies):
@@ -652,13 +658,7 @@ def _line_end(where, fields, i, name, points, rods):
         return pid
     if len(parts) == 3 and parts[0] in ("R", "ROD") and parts[2] in ("A", "B"):
         rid = int(parts[1])
-        if not 1 <= rid <= len(rods):
-            raise where.error(
-                i,
-                fields,
-                f"column {i + 1} ({name}) {text!r}: rod {rid} is not in RODS (valid: "
-                f"1..{len(rods)})",
-            )
+        _check_id(where, fields, i, name, rid, "rod", "RODS", len(rods))
         return (rid, parts[2])
     raise where.error(
         i,
