@@ -12,19 +12,23 @@ import pytest
 import jaxstring as js
 from jaxstring import lines
 from jaxstring.tandem import (
+    NonlinearCompensator,
     TurretLines,
     TurretMooring,
     fpso_hull,
+    hopf_sweep,
     offset_force_curve,
     solve_equilibrium,
     stability,
+    tandem_controlled,
     tandem_equilibria,
     tandem_fishtail,
     tandem_fpso_alone,
+    tandem_hopf,
     turret_lines,
     turret_mooring,
 )
-from jaxstring.tandem.analysis import q_from_state, residual
+from jaxstring.tandem.analysis import controlled_metrics, q_from_state, residual
 
 
 H = 0.25  # m, central-difference step
@@ -188,3 +192,32 @@ def test_fpso_alone_on_lines():
     h = fpso_hull()
     w = np.sqrt(43.796e3 / float(h.m11))
     assert np.min(eigs.imag[eigs.imag > 0]) == pytest.approx(w, rel=5e-3)
+
+
+@pytest.mark.slow
+def test_hopf_point_on_lines_is_the_springs():
+    # S3b on the lines: the fishtail pair hardly depends on the mooring, so the
+    # Hopf point in the astern pull is the spring's (43 kN in the spec)
+    Fs = np.array([30e3, 50e3])
+    _, _, lead_l, F_l = hopf_sweep(lambda F: tandem_hopf(F_ast=F, mooring="lines"), Fs)
+    _, _, lead_s, F_s = hopf_sweep(lambda F: tandem_hopf(F_ast=F), Fs)
+    assert lead_l[0].real > 0 > lead_l[-1].real
+    assert F_l == pytest.approx(F_s, rel=2e-2)
+    np.testing.assert_allclose(np.abs(lead_l.imag), np.abs(lead_s.imag), rtol=1e-2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mooring", ["lines", "dynamic"])
+def test_compensator_holds_the_shuttle_on_lines(mooring):
+    # S4 (current only, law B): the compensator keeps span and heading with the
+    # FPSO on the lines (quasi-static or integrated) as on the spring; its model
+    # of the FPSO's mooring is the spring's loads' absence, which it rejects
+    sc = tandem_controlled(env="current", t1=4000.0, mooring=mooring)
+    ts = jnp.linspace(0.0, 4000.0, 801)
+    solver = "tsit5" if mooring == "lines" else "kvaerno5"
+    traj = js.simulate(sc, solver, rtol=1e-6, atol=1e-6, ts=ts, max_steps=200_000)
+    assert traj.ok, traj.status
+    ctl = next(e for e in sc.effects if isinstance(e, NonlinearCompensator))
+    m = controlled_metrics(traj, float(ctl.d_ref), ctl.X_max, ctl.N_max, 3000.0)
+    assert m["ok"], m
+    assert m["span_error"] < 0.5 and m["heading_error"] < 0.5, m
