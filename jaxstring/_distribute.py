@@ -15,6 +15,9 @@ over this host's cores, and the processes of a `jax.distributed` job.
   per process; each process runs its block on its own devices or workers, and
   every process gathers every member's result (`process_allgather`).
 * GPUs of one process run their shards side by side (`jaxstring._sweep`).
+
+`least_squares` evaluates its experiments in the same pools (`run_tasks`: one
+exported program per experiment structure, a task per experiment).
 """
 
 import atexit

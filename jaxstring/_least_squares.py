@@ -13,6 +13,13 @@ the state's own steps do not resolve.
 Positive parameters are fitted as log p (relative steps; p never crosses 0). At the
 optimum the Gauss-Newton covariance cov(p) = sigma^2 (J^T J)^{-1} gives the standard
 deviations, with sigma given or estimated from the residual, s^2 = |r|^2 / (m - n).
+
+Several experiments can be evaluated in worker processes (`processes`, `executor`;
+the machinery of `sweep`: `jaxstring._distribute`). Each experiment's residuals and
+their Jacobian are one exported program per experiment structure; the compiled
+Levenberg-Marquardt iteration stays in the calling process and reaches the workers
+through a host callback (`jax.pure_callback`) whose JVP is the Jacobian the workers
+return, so that optimistix takes exactly the steps it takes in one process.
 """
 
 import functools
