@@ -19,7 +19,8 @@ the machinery of `sweep`: `jaxstring._distribute`). Each experiment's residuals 
 their Jacobian are one exported program per experiment structure; the compiled
 Levenberg-Marquardt iteration stays in the calling process and reaches the workers
 through a host callback (`jax.pure_callback`) whose JVP is the Jacobian the workers
-return, so that optimistix takes exactly the steps it takes in one process.
+return: the iteration is the one-process iteration, fed with the workers'
+residuals and Jacobians.
 """
 
 import functools
