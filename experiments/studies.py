@@ -588,6 +588,19 @@ STUDIES = (
         ),
     ),
     Study(
+        "identify_parallel",
+        "identify_parallel.py",
+        "least_squares on 4 experiments over 1 and 2 worker processes",
+        "1 min / 5 min",
+        (
+            *PENDULUM,
+            *FIT,
+            "jaxstring/_distribute.py",
+            "jaxstring/_worker.py",
+        ),
+        (Run((), _files("identify_parallel")),),
+    ),
+    Study(
         "sweep_scale",
         "sweep_scale.py",
         "sweeps over worker processes against CVODE-numba over as many processes",

@@ -15,6 +15,9 @@ over this host's cores, and the processes of a `jax.distributed` job.
   per process; each process runs its block on its own devices or workers, and
   every process gathers every member's result (`process_allgather`).
 * GPUs of one process run their shards side by side (`jaxstring._sweep`).
+
+`least_squares` evaluates its experiments in the same pools (`run_tasks`: one
+exported program per experiment structure, a task per experiment).
 """
 
 import atexit
@@ -35,6 +38,7 @@ import numpy as np
 
 from . import _worker
 from ._jit import CPU_COMPILER_OPTIONS
+from ._validate import check_int
 
 
 WORKER_FAILED = -1
@@ -47,6 +51,25 @@ def host_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def check_workers(processes, executor) -> None:
+    """Refuse bad `processes` ("auto" or an int >= 1) and `executor` (a
+    `concurrent.futures.Executor`, not given with `processes`) by name."""
+    if processes != "auto":
+        check_int("processes", processes, 1)
+    if executor is not None:
+        if not isinstance(executor, cf.Executor):
+            raise ValueError(
+                "`executor` must be a concurrent.futures.Executor (a "
+                "ProcessPoolExecutor, a Dask client's get_executor(), ...); got "
+                f"{type(executor).__name__}: {executor!r}."
+            )
+        if processes != "auto":
+            raise ValueError(
+                "give `processes` or `executor`, not both (an executor has its own "
+                f"workers); got processes={processes!r}."
+            )
 
 
 def _flat(fn, args):
@@ -148,12 +171,18 @@ atexit.register(shutdown_pool)
 
 def run_chunks(executor, key, program, chunks, own_pool):
     """Run the exported `program` on each chunk's leaves in `executor`: a list with
-    each chunk's outputs, or the text of its failure. A worker that dies breaks a
-    process pool and every chunk in flight with it, so the lost chunks are run
-    again in parallel once, and those lost again one at a time: a chunk fails only
+    each chunk's outputs, or the text of its failure (`run_tasks`)."""
+    return run_tasks(executor, [(key, program, c) for c in chunks], own_pool)
+
+
+def run_tasks(executor, tasks, own_pool):
+    """Run each task `(key, exported program, leaves)` in `executor`: a list with
+    each task's outputs, or the text of its failure. A worker that dies breaks a
+    process pool and every task in flight with it, so the lost tasks are run
+    again in parallel once, and those lost again one at a time: a task fails only
     when it fails on its own. jaxstring's own pool (`own_pool`) is started afresh
     after a break; a user's executor is used as it is."""
-    results = [None] * len(chunks)
+    results = [None] * len(tasks)
 
     def attempt(todo):
         nonlocal executor
@@ -161,7 +190,7 @@ def run_chunks(executor, key, program, chunks, own_pool):
             workers = _POOL["workers"]
             shutdown_pool()
             executor = process_pool(workers)
-        submit = lambda i: executor.submit(_worker.run, key, program, chunks[i])
+        submit = lambda i: executor.submit(_worker.run, *tasks[i])
         with _main_not_rerun() if own_pool else contextlib.nullcontext():
             futures = {submit(i): i for i in todo}
         lost = []
@@ -174,7 +203,7 @@ def run_chunks(executor, key, program, chunks, own_pool):
                 results[i] = f"{type(error).__name__}: {error}"
         return sorted(lost)
 
-    lost = attempt(range(len(chunks)))
+    lost = attempt(range(len(tasks)))
     if lost:
         lost = attempt(lost)
     for i in lost:

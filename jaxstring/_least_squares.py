@@ -13,8 +13,17 @@ the state's own steps do not resolve.
 Positive parameters are fitted as log p (relative steps; p never crosses 0). At the
 optimum the Gauss-Newton covariance cov(p) = sigma^2 (J^T J)^{-1} gives the standard
 deviations, with sigma given or estimated from the residual, s^2 = |r|^2 / (m - n).
+
+Several experiments can be evaluated in worker processes (`processes`, `executor`;
+the machinery of `sweep`: `jaxstring._distribute`). Each experiment's residuals and
+their Jacobian are one exported program per experiment structure; the compiled
+Levenberg-Marquardt iteration stays in the calling process and reaches the workers
+through a host callback (`jax.pure_callback`) whose JVP is the Jacobian the workers
+return: the iteration is the one-process iteration, fed with the workers'
+residuals and Jacobians.
 """
 
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -26,12 +35,14 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from . import _distribute
 from ._blas import single_blas_thread
 from ._fit import check_jacobian_adjoint, identify_config, resolve, resolve_params
 from ._integrate import solve
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig
+from ._solvers.diffrax_compat import checks_as_nan
 from ._validate import check_int, check_positive, show
 
 
@@ -50,6 +61,8 @@ class LeastSquaresResult(eqx.Module):
       (with their JVPs, one per parameter) the fit made, across all scenes.
     - `converged`, `message`: whether the solver met its tolerance, and why not.
     - `time`: wall time of the call, s (compilation included on a first call).
+    - `processes`: worker processes of this host that evaluated the experiments
+      (1: this process; 0: a user's executor).
     """
 
     scene: Scene
@@ -66,6 +79,7 @@ class LeastSquaresResult(eqx.Module):
     converged: bool
     message: str
     time: float
+    processes: int = 1
 
 
 def _stack_scenes(scenes):
@@ -152,6 +166,124 @@ def _sensitivity_residual_jvp(primals, tangents):
     return r, d.T @ (jnp.zeros_like(x) if tx is None else tx)
 
 
+# --------------------------------------------------------------------------------------
+# Experiments over worker processes
+
+
+def _experiment(x, scene, problem):
+    """One experiment's residuals and their Jacobian d r / d theta at `x` (theta
+    stacked), in forward mode as Levenberg-Marquardt takes it in one process: the
+    program a worker runs."""
+
+    def f(xx):
+        r = problem.residual([xx[i] for i in range(xx.shape[0])], scene)
+        return r, r
+
+    J, r = jax.jacfwd(f, has_aux=True)(x)
+    return r, J
+
+
+class _Evaluations:
+    """The experiments of a fit as exported programs (one per structure) and their
+    arrays, evaluated in worker processes at the parameters the host's
+    Levenberg-Marquardt iteration asks for."""
+
+    def __init__(self, problem, x0, executor, workers):
+        bare = _Problem((), None, *_problem_parts(problem))
+        self.executor, self.workers = executor, workers
+        self.n = x0.shape[0]
+        self.programs, self.leaves, self.sizes = [], [], []
+        for scene in problem.scenes:
+            with checks_as_nan():
+                key, program, leaves, outputs = _distribute.export_chunk(
+                    _experiment, (x0, scene, bare)
+                )
+            self.programs.append((key, program))
+            self.leaves.append([np.asarray(x) for x in leaves[1:]])
+            self.sizes.append(int(outputs[0].shape[0]))
+        self.failed = {}  # experiment index -> why its worker failed
+        self.calls = 0
+
+    def __call__(self, x):
+        self.calls += 1
+        own = self.executor is None
+        pool = _distribute.process_pool(self.workers) if own else self.executor
+        x = np.asarray(x)
+        tasks = [(*p, [x] + rest) for p, rest in zip(self.programs, self.leaves)]
+        results = _distribute.run_tasks(pool, tasks, own)
+        rs, Js = [], []
+        for i, (out, m) in enumerate(zip(results, self.sizes)):
+            if isinstance(out, str):
+                self.failed.setdefault(i, out)
+                out = (np.full(m, np.nan), np.full((m, self.n), np.nan))
+            rs.append(np.asarray(out[0], np.float64))
+            Js.append(np.asarray(out[1], np.float64))
+        return np.concatenate(rs), np.concatenate(Js)
+
+
+def _problem_parts(problem):
+    return (
+        problem.getters,
+        problem.positive,
+        problem.residual_fn,
+        problem.config,
+        problem.ts,
+    )
+
+
+_RUNS = {}  # token -> the `_Evaluations` of a running fit
+
+
+def _host_evaluate(token, x):
+    return _RUNS[int(token)](x)
+
+
+def _evaluate(token, x, m):
+    shapes = (
+        jax.ShapeDtypeStruct((m,), jnp.float64),
+        jax.ShapeDtypeStruct((m, x.shape[0]), jnp.float64),
+    )
+    return jax.pure_callback(_host_evaluate, shapes, token, x, vmap_method="sequential")
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _remote_residuals(token, x, m):
+    return _evaluate(token, x, m)[0]
+
+
+@_remote_residuals.defjvp
+def _remote_residuals_jvp(m, primals, tangents):
+    token, x = primals
+    r, J = _evaluate(token, x, m)
+    return r, J @ tangents[1]
+
+
+class _Remote(eqx.Module):
+    """The residuals of all experiments as the host's iteration sees them: one
+    evaluation in the workers gives the residuals and their Jacobian (its JVPs)."""
+
+    token: Any  # int array: the fit's `_Evaluations` in `_RUNS`
+    m: int = eqx.field(static=True)
+    positive: tuple = eqx.field(static=True)
+
+    def residuals(self, theta, args=None):
+        del args
+        return _remote_residuals(self.token, jnp.stack(theta), self.m)
+
+
+def _workers(processes, executor, scenes) -> int:
+    """Worker processes of this host for the experiments `scenes`: `processes`, or
+    with "auto" one per experiment up to the host's cores where there are several
+    experiments (and the default backend is the CPU); 0 for a user's executor."""
+    if executor is not None:
+        return 0
+    if processes != "auto":
+        return int(processes)
+    if jax.default_backend() != "cpu" or len(scenes) < 2:
+        return 1
+    return min(_distribute.host_cores(), len(scenes))
+
+
 @eqx.filter_jit
 def _solve_ls(problem, theta0, rtol, atol, max_iters):
     sol = optx.least_squares(
@@ -178,6 +310,14 @@ def _solve_ls(problem, theta0, rtol, atol, max_iters):
     )
     J = J / scale[None, :]
     return theta, r0, r, J, sol.result, sol.stats["num_steps"]
+
+
+def _check_count(m, n):
+    if m < n:
+        raise ValueError(
+            f"`residual_fn` must return at least {n} residuals (one per "
+            f"parameter); got {m}."
+        )
 
 
 def _check_bounds(bounds, labels, starts):
@@ -223,6 +363,8 @@ def least_squares(
     max_iters: int = 50,
     tol: float = 1e-8,
     verbose: bool = False,
+    processes="auto",
+    executor=None,
     config: SolveConfig | None = None,
     **options,
 ) -> LeastSquaresResult:
@@ -247,6 +389,24 @@ def least_squares(
     - `max_iters`, `tol`: Levenberg-Marquardt's iteration limit and its relative
       and absolute tolerance on the parameters (in log p where positive).
     - `verbose`: print the result.
+    - `processes`: `"auto"` (default: with two or more experiments on a CPU host,
+      one worker process per experiment up to the host's cores; else this process
+      alone), or the number of worker processes. With workers, each
+      Levenberg-Marquardt iteration sends the current parameters to them; each
+      experiment's residuals and their Jacobian come from one program per
+      experiment structure, traced once in this process and run in jaxstring's
+      own pool of spawned processes (the pool `sweep` uses, kept for later
+      calls; compilation shared through the persistent compilation cache), and
+      the step is taken here. Each experiment is then solved on its own, as one
+      process solves experiments of different structures; experiments of one
+      structure, which one process solves in one vmap, agree with it to about
+      the solver's tolerance rather than to rounding. Measured:
+      docs/performance.md, "Identification over processes".
+    - `executor`: any `concurrent.futures.Executor` whose workers can import
+      jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to evaluate
+      the experiments instead. A worker that dies is replaced and its experiment
+      evaluated again; an experiment whose evaluation fails twice ends the fit
+      with `converged=False` and a message naming the experiment.
     - `config`: the `SolveConfig` of the forward solves (default:
       `SolveConfig.default("identify")`); `options`: its fields as shortcuts
       (`ts`, the save times the residuals use; `solver`, `rtol`, `atol`,
@@ -288,6 +448,7 @@ def least_squares(
     bounds = _check_bounds(bounds, labels, starts)
     check_positive("tol", tol)
     check_int("max_iters", max_iters, 1)
+    _distribute.check_workers(processes, executor)
     if sigma is not None:
         check_positive("sigma", sigma)
     config = identify_config(scenes[0], config, options, "jacobian")
@@ -296,27 +457,42 @@ def least_squares(
     check_jacobian_adjoint(config)
     ts = config.save_times(scenes[0].t0, scenes[0].t1)
     config = config.replace(ts=None)
-    stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
-    problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
+    workers = _workers(processes, executor, scenes)
     theta0 = [
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)
     ]
-    problem, theta0 = config.placed((problem, theta0))
     start = time.perf_counter()
-    # The residuals' structure, before anything compiles.
-    out = eqx.filter_eval_shape(problem.residuals, theta0)
-    if out.ndim != 1 or out.shape[0] < len(getters):
-        raise ValueError(
-            f"`residual_fn` must return at least {len(getters)} residuals (one per "
-            f"parameter); got {out.shape[0]}."
+    if executor is None and workers == 1:
+        stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
+        problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
+        problem, theta0 = config.placed((problem, theta0))
+        # The residuals' structure, before anything compiles.
+        m = eqx.filter_eval_shape(problem.residuals, theta0).shape[0]
+        _check_count(m, len(getters))
+        theta, r0, r, J, result, iters = jax.block_until_ready(
+            _solve_ls(problem, theta0, tol, tol, max_iters)
         )
-    theta, r0, r, J, result, iters = jax.block_until_ready(
-        _solve_ls(problem, theta0, tol, tol, max_iters)
-    )
+        failed = {}
+    else:
+        # Each experiment's residuals and Jacobian in a worker process, the
+        # Levenberg-Marquardt iteration in this one.
+        problem = _Problem(scenes, None, getters, positive, residual_fn, config, ts)
+        evaluations = _Evaluations(problem, jnp.stack(theta0), executor, workers)
+        _check_count(sum(evaluations.sizes), len(getters))
+        token = max(_RUNS, default=0) + 1
+        _RUNS[token] = evaluations
+        remote = _Remote(jnp.asarray(token), sum(evaluations.sizes), positive)
+        try:
+            theta, r0, r, J, result, iters = jax.block_until_ready(
+                _solve_ls(remote, theta0, tol, tol, max_iters)
+            )
+        finally:
+            del _RUNS[token]
+        failed = evaluations.failed
     elapsed = time.perf_counter() - start
     r0, r, J = np.asarray(r0), np.asarray(r), np.asarray(J)
-    if not np.all(np.isfinite(r0)):
+    if not failed and not np.all(np.isfinite(r0)):
         raise ValueError(
             "`residual_fn` returned NaN or inf at the start values: check the data "
             "and that the start scene solves."
@@ -339,6 +515,13 @@ def least_squares(
         message = (
             "not converged: the Levenberg-Marquardt iteration failed (a solve failed "
             "or the residuals are not finite)"
+        )
+    if failed:
+        i, reason = min(failed.items())
+        converged = False
+        message = (
+            f"not converged: the worker process of experiment {i} failed twice "
+            f"({reason})"
         )
     if converged and bounds is not None:
         for name, (low, high) in bounds.items():
@@ -367,6 +550,7 @@ def least_squares(
         converged=converged,
         message=message,
         time=elapsed,
+        processes=workers,
     )
     if verbose:
         vals = "  ".join(

@@ -64,7 +64,6 @@ between its members (profile: docs/numerics.md, "Sweeps: vmap, groups and
 lockstep").
 """
 
-import concurrent.futures as cf
 import copy
 import dataclasses
 import math
@@ -724,20 +723,7 @@ def sweep(
         )
     check_choice("order", order, ("given", "sort"))
     check_choice("mode", mode, ("vmap", "lockstep"))
-    if processes != "auto":
-        check_int("processes", processes, 1)
-    if executor is not None:
-        if not isinstance(executor, cf.Executor):
-            raise ValueError(
-                "`executor` must be a concurrent.futures.Executor (a "
-                "ProcessPoolExecutor, a Dask client's get_executor(), ...); got "
-                f"{type(executor).__name__}: {executor!r}."
-            )
-        if processes != "auto":
-            raise ValueError(
-                "give `processes` or `executor`, not both (an executor has its own "
-                f"workers); got processes={processes!r}."
-            )
+    _distribute.check_workers(processes, executor)
     config = solver_for(solve_config("sweep", config, **options), scene)
     config.check_scene(scene)
     solver = config.solver

@@ -2,10 +2,11 @@
 
 A worker is a process of a `concurrent.futures` executor (jaxstring's own spawn
 pool over the host's cores, or one the user passes). The parent traces a sweep's
-chunk program once and saves it (`jax.export`, pickled as `jaxstring._programs`
-stores programs); a worker loads it by path, compiles it on its CPU (or finds the
-compilation in the persistent cache), and runs it on the arrays it is sent. Only
-JAX is needed here: a worker traces nothing.
+chunk program, or an identification's experiment program, once and saves it
+(`jax.export`, pickled as `jaxstring._programs` stores programs); a worker loads
+it, compiles it on its CPU (or finds the compilation in the persistent cache),
+and runs it on the arrays it is sent. Only JAX is needed here: a worker traces
+nothing.
 """
 
 import os

@@ -30,6 +30,14 @@ FAST = {
     ],
     "docs/guide.md": [
         (
+            "angles, ts = (1.57, 1.18, 0.79, 0.39), jnp.linspace(0.0, 2.0, 101)",
+            "angles, ts = (1.57, 1.18), jnp.linspace(0.0, 0.3, 11)",
+        ),
+        (
+            "js.string_pendulum(k=16, EA=1e3, theta0=a, t1=2.0, **p)",
+            "js.string_pendulum(k=4, EA=1e3, theta0=a, t1=0.3, **p)",
+        ),
+        (
             'formulation="displacement", k=40, EA=1e6, alpha=0.01)',
             'formulation="displacement", k=6, EA=1e6, alpha=0.01, t1=0.3)',
         ),

@@ -2,7 +2,10 @@
 recovers known parameters, reports a Gauss-Newton covariance that matches finite
 differences, fits several experiments at once, and refuses bad input up front."""
 
+import concurrent.futures as cf
 import functools
+import multiprocessing
+import os
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -10,6 +13,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
+from jaxstring._distribute import host_cores
 
 
 TS = jnp.linspace(0.0, 0.3, 16)
@@ -31,9 +35,14 @@ def _data(theta0=np.pi / 2):
     return np.asarray(traj.end_mass)
 
 
-def test_recovers_known_parameters_from_a_start_40_percent_off():
+@pytest.fixture(scope="module")
+def one_process_fit():
     start = _scene(EA=1.4e3, alpha=0.03)
-    res = js.least_squares(start, js.Misfit(_data()), ["alpha", "EA"], ts=TS)
+    return js.least_squares(start, js.Misfit(_data()), ["alpha", "EA"], ts=TS)
+
+
+def test_recovers_known_parameters_from_a_start_40_percent_off(one_process_fit):
+    res = one_process_fit
     assert res.converged, res.message
     assert res.values["alpha"] == pytest.approx(TRUTH["alpha"], rel=1e-4)
     assert res.values["EA"] == pytest.approx(TRUTH["EA"], rel=1e-4)
@@ -202,3 +211,108 @@ def test_experiments_of_one_structure_are_solved_in_one_vmap():
     batched = _Problem((a, b), _stack_scenes((a, b)), *args).residuals(theta)
     assert looped.shape == batched.shape == (2 * TS.size * 2,)
     np.testing.assert_allclose(batched, looped, rtol=0, atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------
+# Experiments over worker processes
+
+
+def _two_structures():
+    """Two experiments of different structures (4 and 5 elements), so that one
+    process also solves them one after the other, as the workers do."""
+    k5 = lambda **kw: js.pendulum.string_pendulum(
+        "displacement", k=5, t1=0.3, theta0=3 * np.pi / 8, **(TRUTH | kw)
+    )
+    truth = js.simulate(k5(), "rodas5p", rtol=1e-11, atol=1e-11, ts=TS)
+    residual = _TwoData(jnp.asarray(_data()), jnp.asarray(truth.end_mass))
+    starts = [_scene(EA=1.4e3, alpha=0.03), k5(EA=1.4e3, alpha=0.03)]
+    return starts, residual
+
+
+def _same_fit(one, two):
+    assert two.converged, two.message
+    # The same steps, but for the last, far below the tolerance: rounding decides
+    # whether the iteration stops one step earlier.
+    assert abs(two.iterations - one.iterations) <= 1
+    for name in ("alpha", "EA"):
+        assert two.values[name] == pytest.approx(one.values[name], rel=1e-10)
+        assert two.std[name] == pytest.approx(one.std[name], rel=1e-8)
+    assert two.cost == pytest.approx(one.cost, rel=1e-6, abs=1e-20)
+
+
+def test_a_worker_process_gives_the_one_process_fit(one_process_fit):
+    start = _scene(EA=1.4e3, alpha=0.03)
+    two = js.least_squares(
+        start, js.Misfit(_data()), ["alpha", "EA"], ts=TS, processes=2
+    )
+    assert one_process_fit.processes == 1 and two.processes == 2
+    _same_fit(one_process_fit, two)
+    assert two.values["alpha"] == pytest.approx(TRUTH["alpha"], rel=1e-4)
+
+
+@pytest.mark.slow
+def test_two_worker_processes_give_the_one_process_fit_of_two_experiments():
+    starts, residual = _two_structures()
+    fit = functools.partial(js.least_squares, starts, residual, ["alpha", "EA"], ts=TS)
+    one, two = fit(processes=1), fit(processes=2)
+    assert one.processes == 1 and two.processes == 2
+    _same_fit(one, two)
+    for name in ("alpha", "EA"):
+        assert two.values[name] == pytest.approx(TRUTH[name], rel=1e-4)
+    assert float(two.scenes[1].model.EA) == pytest.approx(two.values["EA"])
+    # "auto": one worker per experiment, up to the cores of a CPU host.
+    auto = fit()
+    assert auto.processes == (2 if host_cores() >= 2 else 1)
+    _same_fit(one, auto)
+
+
+@pytest.mark.parametrize(
+    "kw, parts",
+    [
+        (dict(processes=0), ["`processes`", "0", ">= 1"]),
+        (dict(processes=1.5), ["`processes`", "1.5"]),
+        (dict(executor="pool"), ["`executor`", "'pool'", "Executor"]),
+    ],
+)
+def test_bad_worker_settings_are_refused_by_name(kw, parts):
+    with pytest.raises(ValueError) as info:
+        js.least_squares(_scene(), js.Misfit(_data()), ["alpha"], ts=TS, **kw)
+    for part in parts:
+        assert part in str(info.value)
+
+
+class _KillExperiment(cf.Executor):
+    """A process pool whose worker dies on every evaluation of the experiment with
+    5 elements (its state has 5 rows)."""
+
+    def __init__(self):
+        self.pool = None
+
+    def _pool(self):
+        if self.pool is None or self.pool._broken:
+            self.pool = cf.ProcessPoolExecutor(
+                2, mp_context=multiprocessing.get_context("spawn")
+            )
+        return self.pool
+
+    def submit(self, fn, *args, **kwargs):
+        leaves = args[2]
+        if any(np.shape(x)[:1] == (5,) for x in leaves[1:]):
+            return self._pool().submit(os._exit, 1)
+        return self._pool().submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait=True, **kwargs):
+        if self.pool is not None:
+            self.pool.shutdown(wait=wait, cancel_futures=True)
+
+
+@pytest.mark.slow
+def test_an_experiment_whose_worker_dies_is_reported_not_raised():
+    starts, residual = _two_structures()
+    with _KillExperiment() as executor:
+        res = js.least_squares(
+            starts, residual, ["alpha", "EA"], ts=TS, executor=executor
+        )
+    assert res.processes == 0
+    assert not res.converged
+    assert "worker process of experiment 1 failed" in res.message

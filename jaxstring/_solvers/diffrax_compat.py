@@ -16,12 +16,18 @@ document as public:
    diffrax's copies out of the program, which otherwise compile to host callbacks
    that JAX neither writes to its persistent compilation cache nor exports to
    worker processes.
+5. The run-time check of a lineax linear solve (`equinox._enum`'s
+   `branched_error_if`), which the tangent of an implicit stage's root find holds
+   in forward mode (optimistix's implicit function theorem solves with
+   `throw=True`): `checks_as_nan` traces a program for worker processes with it
+   returning NaN instead of raising through a host callback.
 
 diffrax versions outside `TESTED` are refused at import with a message that names
 the installed and the tested versions, rather than failing deep inside a solve.
 """
 
 import contextlib
+import functools
 from typing import Any, NamedTuple
 
 import diffrax as dfx
@@ -156,3 +162,26 @@ def save_times_checked():
         yield
     finally:
         eqxi.error_if = original
+
+
+# A jit cache context of its own for programs traced by `checks_as_nan`, so that
+# no part traced before with host callbacks is reused (created at import: JAX
+# does not create user contexts safely while other threads trace).
+_NAN_CHECKS = jax.make_user_context(default_value=False)
+
+
+@contextlib.contextmanager
+def checks_as_nan():
+    """While tracing a program that `jax.export` saves for worker processes, let a
+    failed lineax linear solve return NaN instead of raising through a host
+    callback (which `jax.export` cannot save): the program then reports the
+    failure in its values (a Levenberg-Marquardt step on NaN residuals fails)."""
+    import equinox._enum as eqx_enum
+
+    original = eqx_enum.branched_error_if
+    eqx_enum.branched_error_if = functools.partial(original, on_error="nan")
+    try:
+        with _NAN_CHECKS(True):
+            yield
+    finally:
+        eqx_enum.branched_error_if = original
