@@ -667,7 +667,7 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     )
 
 
-@pytest.mark.parametrize("second_order", [0, 3])
+@pytest.mark.parametrize("second_order", [pytest.param(0, marks=pytest.mark.slow), 3])
 def test_bordered_jacobian_and_solve_equal_dense(second_order):
     # A vessel row (the border) coupled to two chains of springs at scattered rows,
     # the chains' rows (q, v) banded with width 1: the bordered Jacobian equals
