@@ -35,7 +35,7 @@ T1 = 600.0
 
 
 def main(quick=False, repeats=None, segments=()):
-    segments = list(segments) or ([5] if quick else [5, 10, 20])
+    segments = list(segments or ()) or ([5] if quick else [5, 10, 20])
     repeats = repeats or 2
     qs = tandem_fpso_alone(mooring="lines", psi0_deg=10.0, t1=T1)
     ts = jnp.linspace(0.0, T1, 61)
@@ -58,7 +58,7 @@ def main(quick=False, repeats=None, segments=()):
     ]
     for n in segments:
         dyn = with_dynamic_mooring(qs, segments=n, c_m=6.0e5, current=False)
-        obs = dyn.observables(0.0, dyn.y0)
+        obs = dyn.observables(dyn.y0)
         tim, tr = timed(
             lambda: js.simulate(dyn, "kvaerno5", rtol=1e-6, atol=1e-6, ts=ts), repeats
         )

@@ -522,6 +522,14 @@ STUDIES = (
         ),
     ),
     Study(
+        "dynamic_turret",
+        "dynamic_turret.py",
+        "the FPSO on its turret's lines integrated with the hull vs quasi-static",
+        "3 min / 10 min",
+        (*TANDEM, *LINES),
+        (Run((), _files("dynamic_turret")),),
+    ),
+    Study(
         "tanker_controlled",
         "tanker_controlled.py",
         "spec S4: the compensator in four environments, model mismatch",
