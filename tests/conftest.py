@@ -20,25 +20,3 @@ if _cache:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
-
-# The files that take longest, longest first: with `--dist loadfile` and
-# `--no-loadscope-reorder` (pyproject's addopts) the two xdist workers start on
-# them and the many short files fill in behind, so that no long file is left for
-# one worker at the end while the other idles (the order xdist would choose, by
-# test count, puts the few long documentation examples last).
-LONG_FILES = (
-    "tests/solvers/test_fast_solvers.py",
-    "tests/test_docs_examples.py",
-    "tests/lines/test_body_dynamics.py",
-    "tests/test_sweep.py",
-    "tests/test_distribute.py",
-    "tests/solvers/test_esdirk.py",
-    "tests/test_least_squares.py",
-)
-
-
-def pytest_collection_modifyitems(config, items):
-    del config
-    rank = {f: i for i, f in enumerate(LONG_FILES)}
-    first = len(LONG_FILES)
-    items.sort(key=lambda it: rank.get(it.nodeid.split("::")[0], first))
