@@ -19,4 +19,3 @@ if _cache:
     jax.config.update("jax_compilation_cache_dir", os.path.abspath(_cache))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-

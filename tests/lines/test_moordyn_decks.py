@@ -225,8 +225,8 @@ def test_fairlead_tension_gradient_in_EA_matches_central_differences():
         return js.solve(s, config).obs["tension_a"][-1]
 
     p0 = jnp.array([1.0])
-    np.testing.assert_allclose(jax.jacfwd(tension)(p0),
-                               central_differences(tension, p0, 1e-3), rtol=1e-5)  # fmt: skip
+    fd = central_differences(tension, p0, 1e-3)
+    np.testing.assert_allclose(jax.jacfwd(tension)(p0), fd, rtol=1e-5)
 
 
 # ---------------------------------------------------------------------------
