@@ -151,6 +151,13 @@ def test_rodas5p_dense_output_order():
 # ---------------------------------------------------------------------------
 
 
+def _dense_jacobian(scene, y, t=0.0):
+    """The vector field's Jacobian at y, dense `(n b, n b)`, by compiled jacfwd."""
+    n, b = y.shape
+    f = lambda v: scene.vector_field(t, v.reshape(n, b)).reshape(-1)
+    return np.asarray(jax.jit(jax.jacfwd(f))(y.reshape(-1)))
+
+
 def _string_vf(formulation, k):
     scene = js.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
     y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
@@ -163,14 +170,16 @@ def test_string_jacobian_is_block_tridiagonal_and_detected(formulation):
     assert _linalg.detect_width(fn, y, scene) == 1
     # The dense Jacobian's nonzeros lie within one node of the diagonal...
     n, b = y.shape
-    J = np.asarray(
-        jax.jacfwd(lambda v: fn(v.reshape(n, b), scene).reshape(-1))(y.reshape(-1))
-    )
+    J = np.asarray(_dense_jacobian(scene, y, 0.0))
     rows, cols = np.nonzero(J)
     assert np.max(np.abs(rows // b - cols // b)) == 1
     # ... and 3 b coloured JVPs reproduce it exactly.
-    bt = _linalg.block_tridiagonal_jacobian(lambda u: fn(u, scene), y, 1)
-    assert np.max(np.abs(np.asarray(bt.to_dense()) - J)) <= 1e-14 * np.max(np.abs(J))
+    bt = jax.jit(
+        lambda u, s: _linalg.block_tridiagonal_jacobian(
+            lambda v: fn(v, s), u, 1
+        ).to_dense()
+    )(y, scene)
+    assert np.max(np.abs(np.asarray(bt) - J)) <= 1e-14 * np.max(np.abs(J))
 
 
 def test_detect_width_rejects_global_coupling():
@@ -196,9 +205,7 @@ def test_banded_newton_solve_equals_dense(formulation, k, c):
     # solvers; 5.6e-13 when it ran op by op.)
     fn, y, scene = _string_vf(formulation, k)
     n, b = y.shape
-    J = np.asarray(
-        jax.jacfwd(lambda v: fn(v.reshape(n, b), scene).reshape(-1))(y.reshape(-1))
-    )
+    J = _dense_jacobian(scene, y)
     M = np.eye(n * b) - c * J
     rhs = np.random.default_rng(0).standard_normal((n, b))
     dense = np.linalg.solve(M, rhs.reshape(-1))
@@ -207,10 +214,17 @@ def test_banded_newton_solve_equals_dense(formulation, k, c):
     for _ in range(2):
         res = M.astype(np.longdouble) @ dense.astype(np.longdouble) - rhs.reshape(-1)
         dense = dense - np.linalg.solve(M, res.astype(np.float64))
-    bt = _linalg.block_tridiagonal_jacobian(lambda u: fn(u, scene), y, 1)
-    Mb = bt.scale_shift(1.0, -c)
-    fac = _linalg.factor(Mb)
-    x = fac.solve(jnp.asarray(rhs))
+
+    @jax.jit
+    def banded(u, s, r):
+        # the solve and one step of iterative refinement
+        Mb = _linalg.block_tridiagonal_jacobian(lambda v: fn(v, s), u, 1)
+        Mb = Mb.scale_shift(1.0, -c)
+        fac = _linalg.factor(Mb)
+        x = fac.solve(r)
+        return x, x + fac.solve(r - Mb.matvec(x))
+
+    x, refined = banded(y, scene, jnp.asarray(rhs))
     xf = np.asarray(x).reshape(-1)
     backward = np.max(np.abs(M @ xf - rhs.reshape(-1))) / (
         np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(xf))
@@ -218,7 +232,6 @@ def test_banded_newton_solve_equals_dense(formulation, k, c):
     assert backward < 1e-15, backward
     forward = np.max(np.abs(xf - dense)) / np.max(np.abs(dense))
     assert forward < 1e-8, forward
-    refined = x + fac.solve(jnp.asarray(rhs) - Mb.matvec(x))
     err = np.max(np.abs(np.asarray(refined).reshape(-1) - dense)) / np.max(
         np.abs(dense)
     )
@@ -357,9 +370,9 @@ def test_identity_factor_of_the_explicit_stage(structure):
     fn, y, scene = _string_vf("displacement", 16)
     width = None if structure == "dense" else 1
     so = 2 if structure == "reduced" else 0
-    jac = _linalg.jacobian(lambda u: fn(u, scene), y, width, second_order=so)
-    real = _linalg.factor(jac.scale_shift(1.0, -1e-3))
-    ident = _identity_like(jax.eval_shape(lambda: real))
+    jac = lambda: _linalg.jacobian(lambda u: fn(u, scene), y, width, second_order=so)
+    real = jax.eval_shape(lambda: _linalg.factor(jac().scale_shift(1.0, -1e-3)))
+    ident = _identity_like(real)
     assert jax.tree.structure(ident) == jax.tree.structure(real)
     rhs = jnp.asarray(np.random.default_rng(2).standard_normal(y.shape))
     assert np.array_equal(np.asarray(ident.solve(rhs)), np.asarray(rhs))
@@ -421,20 +434,22 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
     fn = lambda u: scene.vector_field(0.0, u)
     assert scene.structure.second_order == dim
-    fac = _linalg.factor(_linalg.jacobian(fn, y, 1, second_order=dim).scale_shift(a, b))
-    assert isinstance(fac, _linalg.SecondOrderFactor)
-    assert fac.sfac.dinv_last.shape == (dim, dim)  # d x d blocks, not 2d x 2d
-    n = y.size
-    J = np.asarray(
-        jax.jacfwd(lambda v: fn(v.reshape(y.shape)).reshape(-1))(y.reshape(-1))
+    fac = lambda u: _linalg.factor(
+        _linalg.jacobian(fn, u, 1, second_order=dim).scale_shift(a, b)
     )
+    shape = jax.eval_shape(fac, y)
+    assert isinstance(shape, _linalg.SecondOrderFactor)
+    assert shape.sfac.dinv_last.shape == (dim, dim)  # d x d blocks, not 2d x 2d
+    n = y.size
+    J = _dense_jacobian(scene, y)
     rhs = rng.standard_normal(y.shape)
     M = a * np.eye(n) + b * J
     dense = np.linalg.solve(M, rhs.reshape(-1))
     for _ in range(2):  # refined as in the banded test above
         res = M.astype(np.longdouble) @ dense.astype(np.longdouble) - rhs.reshape(-1)
         dense = dense - np.linalg.solve(M, res.astype(np.float64))
-    x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+    x = jax.jit(lambda u, r: fac(u).solve(r))(y, jnp.asarray(rhs))
+    x = np.asarray(x).reshape(-1)
     backward = np.max(np.abs(M @ x - rhs.reshape(-1))) / (
         np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(x))
     )
@@ -448,11 +463,7 @@ def test_declared_second_order_matches_the_jacobian():
     scene = js.string_pendulum(k=7, dim=2, effects=("gravity", "kelvin_voigt", "slack"))
     y = scene.y0 + 0.01
     n, b = y.shape
-    J = np.asarray(
-        jax.jacfwd(lambda v: scene.vector_field(0.3, v.reshape(n, b)).reshape(-1))(
-            y.reshape(-1)
-        )
-    ).reshape(n, b, n, b)
+    J = _dense_jacobian(scene, y, 0.3).reshape(n, b, n, b)
     expect = np.zeros((n, 2, n, b))
     for i in range(n):
         expect[i, :, i, 2:] = np.eye(2)
@@ -468,10 +479,13 @@ def test_second_order_factor_refuses_a_wrong_structure():
     scene = js.string_pendulum(k=9)
     fn = lambda u: scene.vector_field(0.0, u) + 0.1 * jnp.roll(u, 1, axis=0)
     y = scene.y0 + 0.01
-    fac = _linalg.factor(
-        _linalg.jacobian(fn, y, 1, second_order=2).scale_shift(1, -0.1)
-    )
-    assert np.all(np.isnan(np.asarray(fac.solve(jnp.ones_like(y)))))
+
+    @jax.jit
+    def solve(u):
+        mat = _linalg.jacobian(fn, u, 1, second_order=2).scale_shift(1, -0.1)
+        return _linalg.factor(mat).solve(jnp.ones_like(u))
+
+    assert np.all(np.isnan(np.asarray(solve(y))))
 
 
 def test_closed_form_2x2_inverse():
@@ -502,12 +516,6 @@ def test_ynnpack_fusions_are_off_in_jaxstrings_compilations():
 # ---------------------------------------------------------------------------
 # The displacement string's own element-wise Jacobian (`vf_jacobian`)
 # ---------------------------------------------------------------------------
-
-
-def _dense_jacobian(scene, y, t=0.0):
-    n, b = y.shape
-    f = lambda v: scene.vector_field(t, v.reshape(n, b)).reshape(-1)
-    return np.asarray(jax.jacfwd(f)(y.reshape(-1)))
 
 
 @pytest.mark.parametrize("dim", (2, 3))
@@ -545,12 +553,13 @@ def test_model_jacobian_factor_equals_dense_solve(a, b):
     scene = js.string_pendulum(k=11, EA=1e6)
     rng = np.random.default_rng(5)
     y = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
-    fac = _linalg.factor(
-        scene.model.vf_jacobian(0.0, y, scene.effects, scene.env).scale_shift(a, b)
+    fac = lambda u: _linalg.factor(
+        scene.model.vf_jacobian(0.0, u, scene.effects, scene.env).scale_shift(a, b)
     )
     M = a * np.eye(y.size) + b * _dense_jacobian(scene, y)
     rhs = rng.standard_normal(y.shape)
-    x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+    x = jax.jit(lambda u, r: fac(u).solve(r))(y, jnp.asarray(rhs))
+    x = np.asarray(x).reshape(-1)
     backward = np.max(np.abs(M @ x - rhs.reshape(-1))) / (
         np.max(np.sum(np.abs(M), axis=1)) * np.max(np.abs(x))
     )
@@ -570,7 +579,7 @@ class ZeroLoad(AbstractStringLoad):
 @pytest.mark.parametrize(
     "solver",
     (
-        "bdf",
+        pytest.param("bdf", marks=pytest.mark.slow),
         pytest.param("rodas5p", marks=pytest.mark.slow),
         pytest.param("kvaerno5", marks=pytest.mark.slow),
     ),
@@ -667,7 +676,7 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     )
 
 
-@pytest.mark.parametrize("second_order", [pytest.param(0, marks=pytest.mark.slow), 3])
+@pytest.mark.parametrize("second_order", [0, 3])
 def test_bordered_jacobian_and_solve_equal_dense(second_order):
     # A vessel row (the border) coupled to two chains of springs at scattered rows,
     # the chains' rows (q, v) banded with width 1: the bordered Jacobian equals
@@ -690,15 +699,17 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order):
 
     y = jnp.asarray(rng.standard_normal((n, 6)))
     spec = _linalg.BorderedWidth(width=1, border=k)
-    mat = _linalg.jacobian(fn, y, spec, second_order=second_order)
+    # compiled, as the solvers run them (op by op, each operation compiles apart)
+    mat = jax.jit(lambda u: _linalg.jacobian(fn, u, spec, second_order=second_order))(y)
     assert isinstance(mat, _linalg.BorderedJacobian)
     J = np.asarray(
-        jax.jacfwd(lambda u: fn(u.reshape(y.shape)).reshape(-1))(y.reshape(-1))
+        jax.jit(jax.jacfwd(lambda u: fn(u.reshape(y.shape)).reshape(-1)))(y.reshape(-1))
     )
-    np.testing.assert_allclose(np.asarray(mat.to_dense()), J, atol=1e-13)
+    as_dense = jax.jit(lambda m: m.to_dense())(mat)
+    np.testing.assert_allclose(np.asarray(as_dense), J, atol=1e-13)
+    solve = jax.jit(lambda m, a, b, r: _linalg.factor(m.scale_shift(a, b)).solve(r))
     for a, b in ((1.0, -0.05), (20.0, -1.0)):
-        fac = _linalg.factor(mat.scale_shift(a, b))
         rhs = rng.standard_normal(y.shape)
-        x = np.asarray(fac.solve(jnp.asarray(rhs))).reshape(-1)
+        x = np.asarray(solve(mat, a, b, jnp.asarray(rhs))).reshape(-1)
         dense = np.linalg.solve(a * np.eye(y.size) + b * J, rhs.reshape(-1))
         np.testing.assert_allclose(x, dense, rtol=1e-11, atol=1e-12)
