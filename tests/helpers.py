@@ -1,6 +1,10 @@
-"""Shared helpers: cached simulations so that tests reuse compiled solves."""
+"""Shared helpers: cached simulations so that tests reuse compiled solves, and a
+process pool whose workers die on cue."""
 
+import concurrent.futures as cf
 import functools
+import multiprocessing
+import os
 
 import jax
 import jax.numpy as jnp
@@ -95,3 +99,32 @@ def count_eqns(jaxpr) -> int:
         for sub in jax.core.jaxprs_in_params(eqn.params):
             n += count_eqns(sub)
     return n
+
+
+class KillingPool(cf.Executor):
+    """A process pool of two spawned workers in which the worker given a call
+    whose array leaves `kill(leaves)` picks dies (`os._exit`), at most `times`
+    times (None: every time); a fresh pool replaces a broken one. `leaves` is
+    the third positional argument of the submitted call, as jaxstring's sweep and
+    least_squares pass their members' arrays."""
+
+    def __init__(self, kill, times=None):
+        self.kill, self.times, self.pool = kill, times, None
+
+    def _pool(self):
+        if self.pool is None or self.pool._broken:
+            self.pool = cf.ProcessPoolExecutor(
+                2, mp_context=multiprocessing.get_context("spawn")
+            )
+        return self.pool
+
+    def submit(self, fn, *args, **kwargs):
+        if self.times != 0 and self.kill(args[2]):
+            if self.times is not None:
+                self.times -= 1
+            return self._pool().submit(os._exit, 1)
+        return self._pool().submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait=True, **kwargs):
+        if self.pool is not None:
+            self.pool.shutdown(wait=wait, cancel_futures=True)

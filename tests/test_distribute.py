@@ -4,7 +4,6 @@ bad settings are refused by name. Local processes only (127.0.0.1), bounded in
 time, cleaned up."""
 
 import concurrent.futures as cf
-import multiprocessing
 import os
 import signal
 import socket
@@ -17,6 +16,8 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _distribute
+
+from .helpers import KillingPool
 
 
 ALPHAS = np.linspace(0.005, 0.05, 8)
@@ -54,38 +55,14 @@ def test_two_worker_processes_give_the_one_process_results(one_process):
     _same(one_process, both)
 
 
-def _die(*args):
-    os._exit(1)
-
-
-class _KillChunk(cf.Executor):
-    """A process pool that kills the worker running the chunk whose first member
-    value is `value` (`times` times), and starts a fresh pool after a worker died."""
-
-    def __init__(self, value, times):
-        self.value, self.times, self.pool = value, times, None
-
-    def _pool(self):
-        if self.pool is None or self.pool._broken:
-            self.pool = cf.ProcessPoolExecutor(
-                2, mp_context=multiprocessing.get_context("spawn")
-            )
-        return self.pool
-
-    def submit(self, fn, *args, **kwargs):
-        leaves = args[2]
-        if self.times and float(leaves[0][0]) == self.value:
-            self.times -= 1
-            return self._pool().submit(_die)
-        return self._pool().submit(fn, *args, **kwargs)
-
-    def shutdown(self, wait=True, **kwargs):
-        if self.pool is not None:
-            self.pool.shutdown(wait=wait, cancel_futures=True)
+def _kill_chunk(value, times):
+    """A pool that kills the worker running the chunk whose first member value is
+    `value`, `times` times."""
+    return KillingPool(lambda leaves: float(leaves[0][0]) == value, times)
 
 
 def test_members_of_a_dead_worker_are_run_again(one_process):
-    with _KillChunk(ALPHAS[0], times=1) as executor:
+    with _kill_chunk(ALPHAS[0], times=1) as executor:
         again = _sweep(executor=executor)
     assert again.ok.all()
     _same(one_process, again)
@@ -96,7 +73,7 @@ def test_a_chunk_that_keeps_failing_carries_a_clear_status(one_process):
     # A worker running the first chunk dies every time (in parallel twice, then on
     # its own): that chunk's members fail, with a status that says so; the chunks
     # lost with it (a dead worker breaks the pool) are run again and succeed.
-    with _KillChunk(ALPHAS[0], times=3) as executor:
+    with _kill_chunk(ALPHAS[0], times=3) as executor:
         res = _sweep(executor=executor)
     lost = ~res.ok
     assert lost[0] and lost.sum() < len(ALPHAS), res.status

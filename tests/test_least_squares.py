@@ -2,10 +2,7 @@
 recovers known parameters, reports a Gauss-Newton covariance that matches finite
 differences, fits several experiments at once, and refuses bad input up front."""
 
-import concurrent.futures as cf
 import functools
-import multiprocessing
-import os
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -14,6 +11,8 @@ import pytest
 
 import jaxstring as js
 from jaxstring._distribute import host_cores
+
+from .helpers import KillingPool
 
 
 TS = jnp.linspace(0.0, 0.3, 16)
@@ -281,35 +280,16 @@ def test_bad_worker_settings_are_refused_by_name(kw, parts):
         assert part in str(info.value)
 
 
-class _KillExperiment(cf.Executor):
-    """A process pool whose worker dies on every evaluation of the experiment with
-    5 elements (its state has 5 rows)."""
-
-    def __init__(self):
-        self.pool = None
-
-    def _pool(self):
-        if self.pool is None or self.pool._broken:
-            self.pool = cf.ProcessPoolExecutor(
-                2, mp_context=multiprocessing.get_context("spawn")
-            )
-        return self.pool
-
-    def submit(self, fn, *args, **kwargs):
-        leaves = args[2]
-        if any(np.shape(x)[:1] == (5,) for x in leaves[1:]):
-            return self._pool().submit(os._exit, 1)
-        return self._pool().submit(fn, *args, **kwargs)
-
-    def shutdown(self, wait=True, **kwargs):
-        if self.pool is not None:
-            self.pool.shutdown(wait=wait, cancel_futures=True)
+def _kill_experiment():
+    """A pool whose worker dies on every evaluation of the experiment with 5
+    elements (its state has 5 rows)."""
+    return KillingPool(lambda leaves: any(np.shape(x)[:1] == (5,) for x in leaves[1:]))
 
 
 @pytest.mark.slow
 def test_an_experiment_whose_worker_dies_is_reported_not_raised():
     starts, residual = _two_structures()
-    with _KillExperiment() as executor:
+    with _kill_experiment() as executor:
         res = js.least_squares(
             starts, residual, ["alpha", "EA"], ts=TS, executor=executor
         )

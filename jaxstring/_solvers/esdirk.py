@@ -5,12 +5,14 @@ implicit Runge-Kutta methods with an explicit first stage", BIT 44 (2004)); the 
 is written out here instead of going through diffrax's generic Runge-Kutta loop,
 whose one scanned body serves every stage with masked coefficient rows, writes each
 stage into a carried stage array and runs a root find that carries the
-factorisation in its state. Here the stages are unrolled at trace time (the
-stages run in one loop over a padded tableau (one traced stage), each stage's
-simplified Newton iteration is one small while loop over (f, size, status), and one
-factorisation of ``I - h gamma J(t0, y0)`` serves every stage of a step (all the
-diagonal entries are gamma) and is not carried through a root find (measured
-against diffrax's Kvaerno: docs/numerics.md, "Kvaerno written out").
+factorisation in its state. Here the stages run in one loop of attempts over a
+padded tableau (one traced stage), each stage's simplified Newton iteration is one
+small while loop over (f, size, status), and one factorisation of
+``I - h gamma J(t0, y0)`` serves every stage of a step (all the diagonal entries
+are gamma) and is not carried through a root find. The program holds one Jacobian
+and one factorisation: the step's, taken at stage 1's first attempt, and a stage's
+refreshed one come from the same traced call (measured against diffrax's Kvaerno,
+run and compile time: docs/numerics.md, "Kvaerno written out").
 
 Stage i solves, for its derivative f_i (f-space, as diffrax),
 
@@ -24,9 +26,9 @@ theta the observed contraction rate (the first update only when it is below
 accepting the first on the rate of the stage before, Radau5's test, let larger
 errors through; docs/numerics.md, "Kvaerno written out"); divergent when
 theta >= 1 or when the predicted error after the remaining iterations is above
-kappa. A stage that fails is retried once from its last iterate with a Jacobian
-taken there; if that fails too the step is rejected (infinite error estimate) and
-the controller (`NewtonLimitedController`) retries a shorter one.
+kappa. A stage that fails is retried once (its second attempt) from its last iterate
+with a Jacobian taken there; if that fails too the step is rejected (infinite error
+estimate) and the controller (`NewtonLimitedController`) retries a shorter one.
 
 This solver takes one Jacobian per step: the right choice where the stiff force is
 linear in the state (natural variables, the tether, the tandem). Models whose stiff
@@ -48,6 +50,7 @@ from typing import ClassVar
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
@@ -136,28 +139,51 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         f0 = solver_state
         if made_jump is not False:
             f0 = lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0)
-        fac = factor(t0, y0)
-        # The stages in one loop (one traced stage, so one Newton iteration and one
-        # refresh in the program, not one per stage); row i of the padded tableau
-        # combines the stage derivatives f_0 .. f_(i-1).
+        # The stages in one loop of attempts (one traced stage, one Newton iteration
+        # and one factorisation in the program, not one per stage or per case):
+        # attempt 0 of stage i iterates from the predictor with the step's
+        # factorisation of I - h gamma J(t0, y0) (taken at stage 1's attempt 0),
+        # attempt 1 (after attempt 0 failed) from attempt 0's last iterate with a
+        # Jacobian taken there. Row i of the padded tableau combines the stage
+        # derivatives f_0 .. f_(i-1).
         s = len(tab.c)
         A, P = np.zeros((s, s)), np.zeros((s, s))
         for i in range(1, s):
             A[i, :i], P[i, :i] = tab.a[i - 1], tab.a_pred[i - 1]
         A, P, C = (jnp.asarray(x, dtype) for x in (A, P, np.asarray(tab.c)))
         combine = lambda row, fs: jnp.tensordot(row, fs, axes=1)
+        shapes = jax.eval_shape(lambda: factor(t0, y0))
+        placeholder = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
 
-        def stage(i, carry):
-            fs, ok = carry
+        def attempt(_, carry):
+            fs, ok, i, retry, f_last, fac_step = carry
+            active = i < s
+            i = jnp.minimum(i, s - 1)
             z = y0 + h * combine(A[i], fs)
-            f_i, conv = self._stage(
-                terms, args, t0 + C[i] * h, z, hg, combine(P[i], fs), fac, factor,
-                width, second_order,
-            )  # fmt: skip
-            return fs.at[i].set(f_i), ok & conv
+            ti = t0 + C[i] * h
+            fresh = active & (retry | (i == 1))
+            tj = jnp.where(retry, ti, t0)
+            yj = jnp.where(retry, z + hg * f_last, y0)
+            fac = lax.cond(fresh, lambda: factor(tj, yj), lambda: fac_step)
+            fac_step = lax.cond((i == 1) & ~retry, lambda: fac, lambda: fac_step)
+            f_init = jnp.where(retry, f_last, combine(P[i], fs))
+            f_i, conv = lax.cond(
+                active,
+                lambda: self._stage(
+                    terms, args, ti, z, hg, f_init, fac, width, second_order
+                ),
+                lambda: (f_init, jnp.array(True)),
+            )
+            done = active & (conv | retry)
+            fs = jnp.where(done, fs.at[i].set(f_i), fs)
+            ok = ok & ~(done & ~conv)
+            i = jnp.where(done, i + 1, jnp.where(active, i, s))
+            return fs, ok, i, active & ~done, f_i, fac_step
 
         fs = jnp.zeros((s,) + y0.shape, dtype).at[0].set(f0)
-        fs, ok = lax.fori_loop(1, s, stage, (fs, jnp.array(True)))
+        init = (fs, jnp.array(True), jnp.array(1), jnp.array(False), f0, placeholder)
+        # at most two attempts per implicit stage
+        fs, ok, *_ = lax.fori_loop(0, 2 * (s - 1), attempt, init)
         z = y0 + h * combine(A[s - 1], fs)
         # Stiffly accurate: y1 is the last stage's value, f(t1, y1) its derivative.
         y1 = z + hg * fs[-1]
@@ -206,22 +232,15 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         _, f, _, status = lax.while_loop(cond, body, init)
         return f, status == 1
 
-    def _stage(self, terms, args, ti, z, hg, f_pred, fac, factor, width,
-               second_order):  # fmt: skip
-        """Solve one implicit stage: the iteration with the step's factorisation,
-        and where it fails, once more from its last iterate with a Jacobian taken
-        there. Returns (f_i, converged)."""
+    def _stage(self, terms, args, ti, z, hg, f_init, fac, width, second_order):
+        """One attempt at an implicit stage: the simplified Newton iteration from
+        `f_init` with the factorisation `fac`. Returns (f_i, converged)."""
 
         def residual(f):
             return f - terms.vf(ti, z + hg * f, args)
 
-        def solve(fn, f_init):
-            f, conv = self._newton(fn, f_init, z, hg, fac)
-
-            def refresh():
-                return self._newton(fn, f, z, hg, factor(ti, z + hg * f))
-
-            f, conv = lax.cond(conv, lambda: (f, conv), refresh)
+        def solve(fn, f_start):
+            f, conv = self._newton(fn, f_start, z, hg, fac)
             # custom_root gives its aux output tangents of its own dtype, which
             # JAX refuses for booleans: pass the flag as a float.
             return f, conv.astype(f.dtype)
@@ -230,5 +249,5 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             mat = _linalg.jacobian(g, b, width, g, second_order)
             return _linalg.factor(mat).solve(b)
 
-        f, conv = lax.custom_root(residual, f_pred, solve, tangent_solve, has_aux=True)
+        f, conv = lax.custom_root(residual, f_init, solve, tangent_solve, has_aux=True)
         return f, lax.stop_gradient(conv) > 0.5
