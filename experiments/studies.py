@@ -631,6 +631,15 @@ STUDIES = (
         (Run((), _files("compile_options")),),
     ),
     Study(
+        "esdirk_compile",
+        "esdirk_compile.py",
+        "compile and run time of the written-out Kvaerno against another commit's",
+        "1 min / 10 min",
+        PENDULUM,
+        (Run(("--ref", "cd90f54"), _files("esdirk_compile")),),
+        quick=(("--ref", "cd90f54"),),
+    ),
+    Study(
         "first_result",
         "first_result.py",
         "time to the first result of each README example, preset and the command, "
