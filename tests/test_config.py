@@ -60,7 +60,9 @@ def _probe(order, env_value=None):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("order", ["numpy_first", "jaxstring_first"])
+@pytest.mark.parametrize(
+    "order", ["numpy_first", pytest.param("jaxstring_first", marks=pytest.mark.slow)]
+)
 def test_user_blas_threads_unchanged_outside_jaxstring_calls(order):
     cores = os.cpu_count()
     r = _probe(order)

@@ -61,6 +61,7 @@ def _kill_chunk(value, times):
     return KillingPool(lambda leaves: float(leaves[0][0]) == value, times)
 
 
+@pytest.mark.slow
 def test_members_of_a_dead_worker_are_run_again(one_process):
     with _kill_chunk(ALPHAS[0], times=1) as executor:
         again = _sweep(executor=executor)
@@ -177,6 +178,7 @@ np.savez(sys.argv[1], result=res.result, **res.out)
 """
 
 
+@pytest.mark.slow
 def test_a_script_without_a_main_guard_is_not_run_again_by_the_workers(
     tmp_path, one_process
 ):

@@ -53,7 +53,12 @@ def python_blocks(text: str) -> list[str]:
     return re.findall(r"^```python\n(.*?)^```", text, flags=re.M | re.S)
 
 
-@pytest.mark.parametrize("document", sorted(FAST))
+# The guide's examples (identification, sweeps) repeat what test_fit, test_sweep and
+# test_least_squares check, at a minute of compilation: slow.
+@pytest.mark.parametrize(
+    "document",
+    ["README.md", pytest.param("docs/guide.md", marks=pytest.mark.slow)],
+)
 def test_code_blocks_run_in_order(document, tmp_path):
     text = (ROOT / document).read_text()
     for written, _ in FAST[document]:

@@ -50,7 +50,9 @@ def test_order_on_the_logistic_equation(method, order):
     assert abs(slope - order) < 0.4, (slope, errs)
 
 
-@pytest.mark.parametrize("method", ["kvaerno3", "kvaerno5"])
+@pytest.mark.parametrize(
+    "method", [pytest.param("kvaerno3", marks=pytest.mark.slow), "kvaerno5"]
+)
 def test_same_steps_as_diffrax_kvaerno(method):
     # The same tableau: with the stage solves converged to rounding, the
     # written-out step and diffrax's generic Runge-Kutta step give the same

@@ -285,9 +285,8 @@ def test_fixed_step_solvers_second_order_on_string(solver):
     assert 1.8 < slope < 2.3, (slope, errs)
 
 
-@pytest.mark.parametrize(
-    "solver", ("theta", pytest.param("newmark", marks=pytest.mark.slow))
-)
+@pytest.mark.slow
+@pytest.mark.parametrize("solver", ("theta", "newmark"))
 def test_fixed_step_paper_setting_runs(solver):
     # The paper's setting: dt = 0.005, 400 steps over 2 s, EA = 1e6. Measured
     # end-mass error against Rodas5P at 1e-9: 5.2e-3 m (implicit Euler: 0.24 m).

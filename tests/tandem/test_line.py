@@ -112,6 +112,7 @@ def test_static_sag_converges_to_the_parabola_like_one_over_N():
     assert errors[1] < 0.55 * errors[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["rodas5p"])
 def test_light_line_fishtail_tracks_the_massless_hawser(solver):
     """1500 s of the fishtail scene (shuttle turned 2.5 deg, spec S3a): with the
