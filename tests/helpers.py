@@ -128,3 +128,18 @@ class KillingPool(cf.Executor):
     def shutdown(self, wait=True, **kwargs):
         if self.pool is not None:
             self.pool.shutdown(wait=wait, cancel_futures=True)
+
+
+def dense_jacobian(scene, y, t=0.0):
+    """The vector field's Jacobian at y, dense `(n b, n b)`, by compiled jacfwd."""
+    n, b = y.shape
+    f = lambda v: scene.vector_field(t, v.reshape(n, b)).reshape(-1)
+    return np.asarray(jax.jit(jax.jacfwd(f))(y.reshape(-1)))
+
+
+def string_vf(formulation, k):
+    """(vector field of (state, scene), a state 1 % off the pendulum's start, the
+    scene) for the string of `k` elements in `formulation`, EA = 1e6 N."""
+    scene = js.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
+    y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
+    return (lambda u, s: s.vector_field(0.0, u)), y, scene

@@ -21,7 +21,7 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   levels are unrolled at trace time). It pivots within the B x B blocks (``inv``)
   but not across blocks: fine for the Newton matrices ``I - h gamma J`` of
   mechanical chains, whose reduced matrices are (scaled) symmetric positive
-  definite; ``tests/solvers/test_fast_solvers.py`` checks it against the dense solve.
+  definite; ``tests/solvers/test_linalg.py`` checks it against the dense solve.
 * ``SecondOrderFactor``: for a model whose node rows are (q, v) with dq/dt = v
   exactly (declared by ``SolverStructure.second_order``), the Newton matrix
   ``[[a I, b I], [P, Q]]`` is reduced to the velocity unknowns,

@@ -99,7 +99,8 @@ class AbstractString(AbstractModel):
         other); the displacement string also has the (r, r') layout, its own
         Jacobian, and stiff directions that turn with the string (a Jacobian per
         implicit stage and per BDF step). tests/solvers/test_fast_solvers.py checks the
-        band against detection and the Jacobian against the JVP-built one."""
+        band against detection, tests/solvers/test_linalg.py the Jacobian against
+        the JVP-built one."""
         local = self._local(effects)
         if self.formulation != "displacement":
             return SolverStructure(bandwidth=1 if local else None)
