@@ -87,13 +87,18 @@ def disable_compilation_cache():
     _CACHE["state"] = "off"
 
 
+def cache_off_by_environment() -> bool:
+    """Whether ``JAXSTRING_CACHE`` asks for no compilation cache (off, 0, false, no)."""
+    return os.environ.get("JAXSTRING_CACHE", "").lower() in ("off", "0", "false", "no")
+
+
 def ensure_compilation_cache():
     """At jaxstring's first solve: the persistent compilation cache on in
     `default_cache_dir()`, unless ``JAXSTRING_CACHE=off``, the user configured
     JAX's cache, or `disable_compilation_cache` was called."""
     if _CACHE["state"] is not None:
         return
-    if os.environ.get("JAXSTRING_CACHE", "").lower() in ("off", "0", "false", "no"):
+    if cache_off_by_environment():
         _CACHE["state"] = "off"
         return
     if jax.config.jax_compilation_cache_dir:  # the user's own setting

@@ -203,9 +203,10 @@ def _cache_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--cache",
         action=argparse.BooleanOptionalAction,
-        default=True,
+        default=None,
         help="JAX's persistent compilation cache in $JAXSTRING_CACHE_DIR or "
-        "~/.cache/jaxstring/jax: a second run skips compilation (default: on)",
+        "~/.cache/jaxstring/jax: a second run skips compilation (default: on, "
+        "unless JAXSTRING_CACHE=off)",
     )
 
 
@@ -430,8 +431,14 @@ def main(argv=None) -> int:
             print(f"error: --frames must be an integer >= 2; got {args.frames}.",
                   file=sys.stderr)  # fmt: skip
             return 2
-        from .._config import disable_compilation_cache, enable_compilation_cache
+        from .._config import (
+            cache_off_by_environment,
+            disable_compilation_cache,
+            enable_compilation_cache,
+        )
 
+        if args.cache is None:
+            args.cache = not cache_off_by_environment()
         if args.cache:
             enable_compilation_cache(min_compile_s=0.0)
         else:
