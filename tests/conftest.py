@@ -1,21 +1,38 @@
 import os
+import pathlib
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 import jaxstring  # noqa: E402, F401  (float64 on)
 
 
-# Persistent compilation cache, opt-in: JAXSTRING_TEST_CACHE=<dir> lets repeated
-# local test runs skip most XLA compilation. It is off by default (jaxstring's own
-# default cache in the user's home too) because a fresh CI run gains little from
-# it and, once, segfaulted inside JAX while writing an executable to the cache
-# (jax 0.10.2, compilation_cache.put_executable_and_time).
+# JAX's persistent compilation cache. JAXSTRING_TEST_CACHE=<dir> keeps one across
+# local runs. Otherwise the two xdist workers of a run share one in the run's
+# temporary folder (pytest keeps the last three): a program that one worker
+# compiled (the same scene structure and solver in another test file) is read
+# back by the other instead of compiled again; nothing is read from or written to
+# the user's ~/.cache/jaxstring (JAXSTRING_CACHE=off: jaxstring's own default
+# cache stays off, in this process and in the processes the tests start).
 _cache = os.environ.get("JAXSTRING_TEST_CACHE")
-os.environ.setdefault("JAXSTRING_CACHE", "on" if _cache else "off")
-if _cache:
-    jax.config.update("jax_compilation_cache_dir", os.path.abspath(_cache))
+os.environ.setdefault("JAXSTRING_CACHE", "off")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _shared_compilation_cache(tmp_path_factory):
+    if _cache:
+        folder = pathlib.Path(_cache).resolve()
+    else:
+        base = tmp_path_factory.getbasetemp()
+        # under xdist each worker's folder is <run>/popen-gw<i>: share <run>
+        run = base.parent if base.name.startswith("popen-gw") else base
+        folder = run / "jax-compilation-cache"
+    folder.mkdir(parents=True, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    yield
+    jax.config.update("jax_compilation_cache_dir", None)
