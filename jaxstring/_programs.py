@@ -59,6 +59,24 @@ def source_digest() -> str:
     return h.hexdigest()
 
 
+def _types(x, out=None) -> str:
+    """The module-qualified type of every object in `x` (dataclass fields, static
+    ones included, lists, tuples and dict values): two classes of one name, such
+    as diffrax's Kvaerno5 and jaxstring's, print alike in a repr."""
+    out = [] if out is None else out
+    out.append(f"{type(x).__module__}.{type(x).__qualname__}")
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        for f in dataclasses.fields(x):
+            _types(getattr(x, f.name, None), out)
+    elif isinstance(x, (list, tuple)):
+        for y in x:
+            _types(y, out)
+    elif isinstance(x, dict):
+        for y in x.values():
+            _types(y, out)
+    return ",".join(out)
+
+
 def _key(static, treedef, leaves) -> str | None:
     text = repr(static)
     if " at 0x" in text:  # an object without a stable repr (a function)
@@ -66,6 +84,7 @@ def _key(static, treedef, leaves) -> str | None:
     h = hashlib.sha256()
     for part in (
         text,
+        _types(static),
         str(treedef),
         str([(x.shape, str(x.dtype)) for x in leaves]),
         jax.__version__,

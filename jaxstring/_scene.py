@@ -8,6 +8,7 @@ from jaxtyping import Array, Float
 
 from ._effect import AbstractEffect
 from ._environment import Environment
+from ._jit import eager_jit
 from ._model import AbstractModel
 from ._validate import check_finite, check_shape, is_concrete, show
 
@@ -114,12 +115,17 @@ class Scene(eqx.Module):
                 )
 
     def vector_field(self, t, y):
-        """dy/dt of the state under the scene's effects."""
-        return self.model.vector_field(t, y, self.effects, self.env)
+        """dy/dt of the state under the scene's effects (compiled as one program
+        when called on concrete arrays)."""
+        return _vector_field(self, _time_array(t), jnp.asarray(y))
 
     def observables(self, y, t=0.0):
-        """Derived quantities of one state (see the model's `observables`)."""
-        return self.model.observables(t, y, self.effects, self.env)
+        """Derived quantities of one state (see the model's `observables`).
+
+        Compiled as one program (per scene structure), so that a call on concrete
+        arrays does not dispatch, and compile, each of its many small operations
+        one by one."""
+        return _observables(self, jnp.asarray(y), _time_array(t))
 
     def tension(self, y):
         return self.observables(y)["tension"]
@@ -141,3 +147,17 @@ class Scene(eqx.Module):
 def scene_vector_field(t, y, scene: Scene):
     """diffrax-style vector field: the scene travels as `args`, never closed over."""
     return scene.vector_field(t, y)
+
+
+def _time_array(t):
+    return t if isinstance(t, jax.Array) else jnp.asarray(t, dtype=jnp.float64)
+
+
+@eager_jit
+def _observables(scene, y, t):
+    return scene.model.observables(t, y, scene.effects, scene.env)
+
+
+@eager_jit
+def _vector_field(scene, t, y):
+    return scene.model.vector_field(t, y, scene.effects, scene.env)

@@ -1,6 +1,9 @@
 import numpy as np
 import pytest
 
+import jax.numpy as jnp
+
+import jaxstring as js
 from jaxstring.cli.main import main
 
 
@@ -114,6 +117,28 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
     assert jnp.allclose(other["y"], 1.5 * expected, rtol=1e-15, atol=1e-15)
     assert int(second["n"]) == 4  # 0.5, 1, 1.5, 2
     assert bad is None  # host callbacks: no program, the caller runs it its own way
+
+
+def test_saved_programs_of_two_solver_classes_of_one_name_are_two(tmp_path):
+    # diffrax's Kvaerno5 and jaxstring's print alike: the saved program's key
+    # tells them apart by module, or a solve would run the other solver's program.
+    import diffrax as dfx
+
+    from jaxstring import _programs
+
+    def fn(x, config):
+        return {"y": x * (2.0 if isinstance(config.solver, js.Kvaerno5) else 3.0)}
+
+    x = jnp.ones(3)
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        ours = _programs.call(fn, x, js.SolveConfig(solver=js.Kvaerno5()))
+        theirs = _programs.call(fn, x, js.SolveConfig(solver=dfx.Kvaerno5()))
+    finally:
+        _programs.set_program_folder(None)
+    assert repr(js.Kvaerno5()) == repr(dfx.Kvaerno5())
+    assert float(ours["y"][0]) == 2.0 and float(theirs["y"][0]) == 3.0
+    assert len(list(tmp_path.glob("*.program"))) == 2
 
 
 @pytest.mark.parametrize(

@@ -2,7 +2,10 @@
 
 import math
 
+import jax.numpy as jnp
+
 from .._environment import Environment, G
+from .._jit import eager_jit
 from .._scene import Scene
 from .._validate import (
     check_angle,
@@ -95,7 +98,7 @@ def string_pendulum(
             built.append(e)
     model = FORMULATIONS[formulation](l=l, mu=mu, m_s=m_s, EA=EA, k=k, dim=dim)
     if y0 is None:
-        y0 = model.initial_state(theta0)
+        y0 = _initial_state(model, jnp.asarray(theta0, dtype=jnp.float64))
     else:
         check_finite("y0", y0)
     return Scene(
@@ -106,3 +109,8 @@ def string_pendulum(
         name=f"string-pendulum/{formulation}",
         env=Environment(g=g),
     )
+
+
+@eager_jit
+def _initial_state(model, theta0):
+    return model.initial_state(theta0)

@@ -38,8 +38,9 @@ def test_left_out_effect_is_not_computed_and_changes_nothing_else(formulation):
         # Fewer operations in the compiled vector field ...
         assert _vf_eqns(part) < n_full, left_out
         # ... and, where the effect had no influence (g = 0, alpha = 0, taut
-        # string), exactly the same vector field.
-        np.testing.assert_array_equal(part.vector_field(0.0, y), f_full)
+        # string), the same vector field (to rounding: the two compiled programs
+        # may order their sums differently).
+        np.testing.assert_allclose(part.vector_field(0.0, y), f_full, rtol=1e-9)
     bare = js.string_pendulum(effects=(), **kw)
     assert _vf_eqns(bare) < min(
         _vf_eqns(js.string_pendulum(effects=(e,), **kw))

@@ -99,6 +99,18 @@ def test_energy_never_increases_with_dissipation(formulation):
     assert e[-1] < e[0] - 0.01 * scale  # and it does dissipate
 
 
+def test_natural_and_angle_forms_are_one_semi_discrete_system():
+    # The two natural-variable forms integrate the same ODE (the fast check; the
+    # convergence of the displacement form towards them is the slow test below).
+    n = run("natural", k=10, n_save=101)
+    a = run("angle", k=10, n_save=101)
+    assert n.ok and a.ok
+    gap = float(np.max(np.abs(n.end_mass - a.end_mass)))
+    assert gap < 1e-6, gap
+    assert float(np.max(np.abs(a.end_mass[:, 0]))) > 0.5  # it really swings
+
+
+@pytest.mark.slow
 def test_formulations_agree_and_converge_with_k():
     ks = (10, 20, 40)
     diffs = []
