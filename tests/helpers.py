@@ -9,11 +9,21 @@ import os
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxstring as js
 
 
 FORMULATIONS = ("displacement", "natural", "angle")
+
+# The natural and angle forms integrate the same ODE (test_physics checks it at
+# k = 10): a check parametrized over formulations runs the angle form among the
+# slow tests.
+FORMULATIONS_FAST = (
+    "displacement",
+    "natural",
+    pytest.param("angle", marks=pytest.mark.slow),
+)
 
 
 @functools.cache

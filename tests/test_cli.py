@@ -1,7 +1,6 @@
+import jax.numpy as jnp
 import numpy as np
 import pytest
-
-import jax.numpy as jnp
 
 import jaxstring as js
 from jaxstring.cli.main import main

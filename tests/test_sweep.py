@@ -247,9 +247,18 @@ def test_batched_factor_equals_per_member_dense_solves(linear_solver):
     rhs = jnp.asarray(rng.standard_normal(ys.shape))
     x = fac.solve(rhs)
     width = None if linear_solver == "batched_dense" else 1
+
+    def own(u, i):
+        return residual(ys.at[i].set(u), (eas, al))[i]
+
+    member_jacobian = jax.jit(jax.jacfwd(own))
+    single_solve = jax.jit(
+        lambda u, r, i: _linalg.factor(
+            _linalg.jacobian(lambda v: own(v, i), u, width)
+        ).solve(r)
+    )
     for i in range(len(scenes)):
-        own = lambda u: residual(ys.at[i].set(u), (eas, al))[i]
-        J = np.asarray(jax.jacfwd(own)(ys[i])).reshape(ys[i].size, ys[i].size)
+        J = np.asarray(member_jacobian(ys[i], i)).reshape(ys[i].size, ys[i].size)
         xi = np.asarray(x[i]).ravel()
         b = np.asarray(rhs[i]).ravel()
         # Backward stable: residual at rounding level of |J| |x|.
@@ -258,7 +267,7 @@ def test_batched_factor_equals_per_member_dense_solves(linear_solver):
         # Forward error: the single-member path of the same structure and a dense
         # LU agree to the conditioning of J (I - h J of a stiff string).
         bound = 1e-15 * np.linalg.cond(J) * np.max(np.abs(xi))
-        single = _linalg.factor(_linalg.jacobian(own, ys[i], width)).solve(rhs[i])
+        single = single_solve(ys[i], rhs[i], i)
         assert np.max(np.abs(np.asarray(single).ravel() - xi)) <= bound
         assert np.max(np.abs(np.linalg.solve(J, b) - xi)) <= bound
 

@@ -9,7 +9,7 @@ import scipy.optimize
 
 import jaxstring as js
 
-from ..helpers import FORMULATIONS, fitted_order, run, zero_crossings
+from ..helpers import FORMULATIONS, FORMULATIONS_FAST, fitted_order, run, zero_crossings
 
 
 G = 9.81
@@ -43,7 +43,7 @@ def _axial_mode_scene(formulation, k, EA, V, t1):
     return scene, omega
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_axial_frequency_of_bar_with_tip_mass(formulation):
     # beta tan(beta) = mu l / m_s, omega = (beta / l) sqrt(EA / mu): within 1 % at k=40.
     scene, omega = _axial_mode_scene(formulation, k=40, EA=1e4, V=1e-3, t1=0.25)
@@ -58,7 +58,7 @@ def test_axial_frequency_of_bar_with_tip_mass(formulation):
     assert rel < 0.01, f"{formulation}: omega error {rel:.2e}"
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).
