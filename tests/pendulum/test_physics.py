@@ -143,7 +143,7 @@ HARD_CASES = {
 
 
 @pytest.mark.parametrize("case", list(HARD_CASES))
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_hard_cases_integrate(formulation, case):
     kw = HARD_CASES[case]
     max_steps = 200_000
