@@ -640,6 +640,14 @@ STUDIES = (
         quick=(("--ref", "cd90f54"),),
     ),
     Study(
+        "suite_profile",
+        "suite_profile.py",
+        "where the default test run's time goes: XLA compilation, tracing, lowering",
+        "1 min / 20 min",
+        ("jaxstring", "tests", "experiments/_suite_profile_plugin.py"),
+        (Run((), _files("suite_profile")),),
+    ),
+    Study(
         "first_result",
         "first_result.py",
         "time to the first result of each README example, preset and the command, "

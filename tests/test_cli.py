@@ -68,7 +68,7 @@ def test_command_caches_the_compiled_solve(tmp_path):
     cmd = [exe, *FAST, "--out", str(tmp_path / "out")]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    solves = [f for f in os.listdir(cache) if f.startswith("jit_call")]
+    solves = sorted(f for f in os.listdir(cache) if f.startswith("jit_call"))
     assert solves, sorted(os.listdir(cache))
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0, second.stderr
