@@ -645,7 +645,7 @@ STUDIES = (
         "where the default test run's time goes: XLA compilation, tracing, lowering",
         "1 min / 20 min",
         ("jaxstring", "tests", "experiments/_suite_profile_plugin.py"),
-        (Run((), _files("suite_profile")),),
+        (Run((), (*_files("suite_profile"), "suite_profile_tests.csv")),),
     ),
     Study(
         "first_result",

@@ -11,7 +11,8 @@ the README's examples, worker pools) count those processes' time as wall time
 only.
 
 Run: ``python experiments/suite_profile.py [--quick] [-- PYTEST ARGS]``.
-Writes results/suite_profile.{md,csv}.
+Writes results/suite_profile.{md,csv} (the whole run, the costliest files and
+tests) and results/suite_profile_tests.csv (every test).
 """
 
 import argparse
@@ -61,6 +62,13 @@ def main(quick=False, pytest_args=()):
         rows.append(dict(part=name, **{k: rec[k] for k in FIELDS}, tests=n))
     top = sorted(tests.items(), key=lambda kv: -kv[1]["wall_s"])[:25]
     rows += [dict(part=t, **{k: r.get(k, 0) for k in FIELDS}, tests=1) for t, r in top]
+    every = sorted(tests.items(), key=lambda kv: -kv[1].get("wall_s", 0))
+    common.write_csv(
+        "suite_profile_tests.csv",
+        [dict(test=t, **{k: round(r.get(k, 0), 3) for k in FIELDS}) for t, r in every],
+        ["test", *FIELDS],
+        comments=[f"Every test of the default test run: {' '.join(args)}"],
+    )
     share = lambda k: 100 * total[k] / max(total["wall_s"], 1e-9)  # noqa: E731
     common.write_table(
         "suite_profile",

@@ -32,6 +32,7 @@ def test_pendulum_animation_ends_at_the_end_mass(tmp_path):
     assert _frames(path) == 8
 
 
+@pytest.mark.slow
 def test_tether_animation_draws_the_cable(tmp_path):
     from jaxstring.tether import plot
 
@@ -58,6 +59,7 @@ def test_tandem_animation_draws_the_vessels(tmp_path):
     assert _frames(path) == 4
 
 
+@pytest.mark.slow
 def test_cli_animate_writes_a_gif(tmp_path, capsys):
     argv = ["run", "string-pendulum", "--k", "4", "--EA", "1e4", "--t1", "0.2"]
     code = main(

@@ -46,6 +46,9 @@ def _same(a, b):
         np.testing.assert_allclose(a.out[key], b.out[key], rtol=1e-12, atol=1e-12)
 
 
+# Worker processes also run in the default run's test_least_squares (a fit over a
+# worker process); this sweep repeats them.
+@pytest.mark.slow
 def test_two_worker_processes_give_the_one_process_results(one_process):
     two = _sweep(processes=2)
     assert two.processes == 2 and two.ok.all()

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._jit import eager_jit
 from .._model import AbstractModel
 from .._validate import check_finite, check_int, check_positive
 from ..chain import (
@@ -330,17 +331,9 @@ def static_line(model: TandemLine, yv, effects, env, sag_guess=None, max_steps=1
     found."""
     check_finite("yv", yv)
     _, line_eff = split_line_effects(effects)
-    line = model.line
+    sag = jnp.asarray(0.0 if sag_guess is None else sag_guess, jnp.float64)
     yv = jnp.asarray(yv, jnp.float64)
-    still = yv.at[3:6].set(0.0).at[9:12].set(0.0)
-    root, fast = model._mounts(still)
-    N = line.N
-    s = (jnp.arange(N) + 1.0) / (N + 1)
-    straight = root.position + s[:, None] * (fast.position - root.position)
-    sag = 0.0 if sag_guess is None else sag_guess
-    p0 = straight.at[:, 2].add(-4.0 * sag * s * (1 - s))
-    args = (line, root, fast, line_eff, env)
-    p, res = _root(_static_residual, p0, args, max_steps, 1e-12)
+    p, res = _static_shape(model, yv, line_eff, env, sag, max_steps)
     res = float(res)
     if not np.isfinite(res) or res > 1e-3:
         raise ValueError(
@@ -348,6 +341,33 @@ def static_line(model: TandemLine, yv, effects, env, sag_guess=None, max_steps=1
             "check that the fairleads are at most the line length apart."
         )
     return jnp.concatenate([p, jnp.zeros_like(p)], axis=1)
+
+
+@eager_jit
+def _static_shape(model, yv, line_eff, env, sag, max_steps):
+    """Newton on the still line's node forces from a parabolic guess of depth
+    `sag` between the fairleads: (node positions, max |residual|)."""
+    line = model.line
+    still = yv.at[3:6].set(0.0).at[9:12].set(0.0)
+    root, fast = model._mounts(still)
+    N = line.N
+    s = (jnp.arange(N) + 1.0) / (N + 1)
+    straight = root.position + s[:, None] * (fast.position - root.position)
+    p0 = straight.at[:, 2].add(-4.0 * sag * s * (1 - s))
+    args = (line, root, fast, line_eff, env)
+    return _root(_static_residual, p0, args, max_steps, 1e-12)
+
+
+@eager_jit
+def _sag_guess(model, hawser, yv, env):
+    """The parabola's sag w l0^2 / (8 T) of the line at the massless hawser's
+    tension at `yv` (at least 1 kN)."""
+    line = model.line
+    w = (line.mass_per_length - env.rho_water * 0.25 * jnp.pi * line.d**2) * env.g
+    T0 = jnp.maximum(
+        hawser.tension(model.tandem, yv.reshape(2, 6)[:, :3], jnp.zeros((2, 3))), 1e3
+    )
+    return w * hawser.l0**2 / (8 * T0)
 
 
 def line_equilibrium(scene, y_guess=None, max_steps=200):
@@ -406,11 +426,7 @@ def with_line(scene, c_n=1.0, c_t=0.1, gravity=True, name=None, **line_options):
     eff = vessel + eff
     yv = jnp.asarray(scene.y0)
     env = scene.env
-    w = (line.mass_per_length - env.rho_water * 0.25 * jnp.pi * line.d**2) * env.g
-    T0 = jnp.maximum(
-        hawser.tension(scene.model, yv.reshape(2, 6)[:, :3], jnp.zeros((2, 3))), 1e3
-    )
-    sag = float(w * hawser.l0**2 / (8 * T0)) if gravity else 0.0
+    sag = _sag_guess(model, hawser, yv, env) if gravity else 0.0
     yl = static_line(model, yv, eff, env, sag_guess=sag)
     y0 = model.join(yv, yl)
     return Scene(

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._environment import Environment, UniformCurrent
+from .._jit import eager_jit
 from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator
@@ -106,6 +107,12 @@ def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     """The aligned equilibrium (both vessels heading `heading`, shuttle astern) for
     loads along that axis (current, and wind along the current): exact, from the
     surge balances. Returns the state."""
+    f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
+    return _aligned_equilibrium(model, effects, env, f64(F_ast), f64(heading))
+
+
+@eager_jit
+def _aligned_equilibrium(model, effects, env, F_ast, heading):
     hawsers = [e for e in effects if isinstance(e, Hawser)]
     moorings = [e for e in effects if isinstance(e, (TurretMooring, TurretLines))]
     X = _axial_loads(model, effects, env, heading)
@@ -174,6 +181,11 @@ def _check_dynamic(mooring, **refused):
 
 def _perturb_shuttle_heading(model, y, angle):
     """Turn the shuttle by `angle` (rad) about its bow fairlead."""
+    return _turn_shuttle(model, y, jnp.asarray(angle, jnp.float64))
+
+
+@eager_jit
+def _turn_shuttle(model, y, angle):
     psi = y[8]
     P2 = y[6:8] + model.x_h2 * jnp.stack([jnp.cos(psi), jnp.sin(psi)])
     psi_new = psi + angle

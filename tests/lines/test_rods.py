@@ -174,9 +174,7 @@ def test_coupled_rod_follows_its_motion():
     )  # fmt: skip
     y0 = lines.initial_shape(model, (), js.Environment())
     for t in (0.3, 1.1):
-        obs = js.Scene(model, (), y0, t1=2.0).model.observables(
-            t, y0, (), js.Environment()
-        )
+        obs = js.Scene(model, (), y0, t1=2.0).observables(y0, t)
         a = np.array([0, 0, -5 + 0.5 * math.sin(t)])
         roll = 0.2 * math.sin(t)
         b = a + 2 * np.array([0, math.cos(roll), math.sin(roll)])

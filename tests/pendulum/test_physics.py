@@ -63,7 +63,7 @@ def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).
     mu, m_s, l, EA, theta0 = 1e-3, 1.0, 1.0, 1e6, 0.05
-    traj = run(formulation, EA=EA, mu=mu, m_s=m_s, theta0=theta0, t1=3.9, n_save=401)
+    traj = run(formulation, EA=EA, mu=mu, m_s=m_s, theta0=theta0, t1=3.9)
     assert traj.ok, traj.status
     L = l * (1 + m_s * G / EA)
     T0 = (
@@ -79,9 +79,9 @@ def test_small_amplitude_period_light_string(formulation):
     assert rel < 0.005, f"{formulation}: period {period:.5f} vs {T_exact:.5f}"
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_energy_conserved_without_dissipation(formulation):
-    traj = run(formulation, alpha=0.0, t1=2.0, rtol=1e-9, atol=1e-9, n_save=401)
+    traj = run(formulation, alpha=0.0, t1=2.0, rtol=1e-9, atol=1e-9)
     assert traj.ok, traj.status
     e = np.asarray(traj.energy)
     scale = (1.0 + 1.0) * G * 1.0  # (mu l + m_s) g l
@@ -89,9 +89,9 @@ def test_energy_conserved_without_dissipation(formulation):
     assert drift < 1e-6, f"{formulation}: relative energy drift {drift:.2e}"
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_energy_never_increases_with_dissipation(formulation):
-    traj = run(formulation, alpha=0.01, t1=2.0, rtol=1e-9, atol=1e-9, n_save=401)
+    traj = run(formulation, alpha=0.01, t1=2.0, rtol=1e-9, atol=1e-9)
     assert traj.ok, traj.status
     e = np.asarray(traj.energy)
     scale = 2.0 * G
@@ -142,8 +142,10 @@ HARD_CASES = {
 }
 
 
+# The default run's hard cases: tests/pendulum/test_hard_cases.py and test_slack_snap.py.
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(HARD_CASES))
-@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
+@pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_hard_cases_integrate(formulation, case):
     kw = HARD_CASES[case]
     max_steps = 200_000

@@ -59,7 +59,15 @@ def _solve_linear(tol, max_order):
     )
 
 
-@pytest.mark.parametrize("max_order", [1, 2, 3, 5])
+@pytest.mark.parametrize(
+    "max_order",
+    [
+        1,
+        pytest.param(2, marks=pytest.mark.slow),
+        pytest.param(3, marks=pytest.mark.slow),
+        5,
+    ],
+)
 def test_order_of_convergence(linear_reference, max_order):
     # Error against the number of steps falls like N^-q at fixed max order q
     # (start-up at order 1 and the adaptive steps make higher orders noisier).

@@ -35,8 +35,11 @@ def _fixed(solver, vf, y0, h, t1):
 
 
 @pytest.mark.parametrize(
-    "method, order", [("kvaerno3", 3), ("kvaerno4", 4), ("kvaerno5", 5)]
-)
+    "method, order",
+    [pytest.param("kvaerno3", 3, marks=pytest.mark.slow),
+     pytest.param("kvaerno4", 4, marks=pytest.mark.slow),
+     ("kvaerno5", 5)],
+)  # fmt: skip
 def test_order_on_the_logistic_equation(method, order):
     # u' = u (1 - u), u(0) = 0.1, exact solution; fixed steps, tight stage solves.
     hs = (0.4, 0.2, 0.1, 0.05)

@@ -228,6 +228,7 @@ def test_newton_refresh_removes_displacement_rejections():
     assert _err(runs[True], runs[False]) < 1e-5
 
 
+@pytest.mark.slow
 def test_refresh_before_predicted_divergence():
     # A stale Jacobian on the EA = 1e9 string often contracts at a rate below
     # `refresh_rate` that is still too slow to converge within `max_iters`;

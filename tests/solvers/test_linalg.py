@@ -12,7 +12,7 @@ import pytest
 import jaxstring as js
 from jaxstring import _linalg
 
-from ..helpers import FORMULATIONS, dense_jacobian, string_vf
+from ..helpers import FORMULATIONS_FAST, dense_jacobian, string_vf
 
 
 # ---------------------------------------------------------------------------
@@ -20,7 +20,7 @@ from ..helpers import FORMULATIONS, dense_jacobian, string_vf
 # ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_string_jacobian_is_block_tridiagonal_and_detected(formulation):
     fn, y, scene = string_vf(formulation, 13)
     assert _linalg.detect_width(fn, y, scene) == 1
@@ -46,7 +46,7 @@ def test_detect_width_rejects_global_coupling():
     assert _linalg.detect_width(fn, jnp.ones((20, 4)), jnp.array(2.0)) is None
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 @pytest.mark.parametrize(
     "k, c", [(13, 1e-3), pytest.param(27, 1e-4, marks=pytest.mark.slow)]
 )

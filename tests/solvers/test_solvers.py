@@ -42,6 +42,8 @@ def test_adaptive_solvers_agree_with_reference(solver, tol):
     assert _err(traj, ref) < tol, _err(traj, ref)
 
 
+# The fixed-step methods' orders: test_fast_solvers (damped oscillator, string).
+@pytest.mark.slow
 def test_fixed_step_implicit_euler_paper_setting_first_order():
     # The paper's fixed step dt = 0.005 (400 steps over 2 s) must run, and the
     # error must fall like dt.

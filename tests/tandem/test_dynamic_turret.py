@@ -42,6 +42,7 @@ def _turret_force(model: MooredVessels, yl, P, effects, env):
     return fb[jnp.asarray(ib, int)].sum(0)[0] + fa[jnp.asarray(ia, int)].sum(0)[0]
 
 
+@pytest.mark.slow
 def test_coupled_modes_are_the_spring_of_the_lines_stiffness():
     # the FPSO alone heading into the current, its turret on the packaged deck's
     # lines (3 segments a line: 73 state rows) in still water

@@ -148,6 +148,7 @@ def test_aceam_winch_length_error_and_end_tension_changes():
     assert np.median(F[paying] / F0[paying]) < 0.6
 
 
+@pytest.mark.slow
 def test_aceam_winch_law_as_printed_lags_by_T_times_haul_speed():
     # The reference model as printed, a = ((g - l)/T - l')/T1, follows a ramp
     # target g' = -v (hauling in) with the steady lag l - g = T v: the partial
