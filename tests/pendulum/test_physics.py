@@ -142,7 +142,7 @@ HARD_CASES = {
 }
 
 
-# The default run's hard cases: tests/pendulum/test_hard_cases.py and test_slack_snap.py.
+# The default run's hard cases: tests/pendulum/test_hard_cases.py, test_slack_snap.py.
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(HARD_CASES))
 @pytest.mark.parametrize("formulation", FORMULATIONS)
