@@ -640,6 +640,15 @@ STUDIES = (
         quick=(("--ref", "cd90f54"),),
     ),
     Study(
+        "block_elimination",
+        "block_elimination.py",
+        "block Thomas against block cyclic reduction: compile and run time, "
+        "kernels and whole solves",
+        "1 min / 3 min",
+        PENDULUM,
+        (Run((), _files("block_elimination", "block_elimination_solves")),),
+    ),
+    Study(
         "suite_profile",
         "suite_profile.py",
         "where the default test run's time goes: XLA compilation, tracing, lowering",

@@ -17,8 +17,11 @@ from .banded import (
     DenseJacobian as DenseJacobian,
     SecondOrderFactor as SecondOrderFactor,
     SecondOrderJacobian as SecondOrderJacobian,
+    ThomasFactor as ThomasFactor,
     bcr_factor as bcr_factor,
     bcr_solve as bcr_solve,
+    block_factor as block_factor,
+    block_solve as block_solve,
     block_tridiagonal_jacobian as block_tridiagonal_jacobian,
     bordered_jacobian as bordered_jacobian,
     choose_structure as choose_structure,
@@ -30,4 +33,6 @@ from .banded import (
     model_jacobian as model_jacobian,
     second_order_factor as second_order_factor,
     small_inv as small_inv,
+    thomas_factor as thomas_factor,
+    thomas_solve as thomas_solve,
 )

@@ -22,6 +22,11 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   but not across blocks: fine for the Newton matrices ``I - h gamma J`` of
   mechanical chains, whose reduced matrices are (scaled) symmetric positive
   definite; ``tests/solvers/test_linalg.py`` checks it against the dense solve.
+* ``thomas_factor`` / ``thomas_solve``: the block Thomas algorithm (elimination
+  from the first block to the last, one step in a ``lax.scan``): a program of one
+  step whatever N. ``block_factor`` / ``block_solve`` use it for blocks of at most
+  two rows on the CPU, cyclic reduction otherwise (measured:
+  docs/numerics.md, "Banded linear algebra").
 * ``SecondOrderFactor``: for a model whose node rows are (q, v) with dq/dt = v
   exactly (declared by ``SolverStructure.second_order``), the Newton matrix
   ``[[a I, b I], [P, Q]]`` is reduced to the velocity unknowns,
@@ -38,11 +43,13 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
 
 import dataclasses
 import math
+from typing import Any
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
+import jax.lax as lax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import jax.tree_util as jtu
@@ -465,6 +472,82 @@ def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
     return BCRFactor(tuple(levels), small_inv(D[0]))
 
 
+class ThomasFactor(eqx.Module):
+    """Block LU of a block-tridiagonal matrix, sequential over the blocks
+    (`thomas_factor`)."""
+
+    w: Array  # (N - 1, B, B): L_i D'_{i-1}^{-1}, the forward sweep's multipliers
+    dinv: Array  # (N, B, B): inverses of the eliminated diagonal blocks D'_i
+    upper: Array  # (N, B, B): the matrix's upper blocks
+
+
+def thomas_factor(mat: BlockTridiagonal) -> ThomasFactor:
+    """Block Gaussian elimination from the first block to the last (the block Thomas
+    algorithm): `D'_0 = D_0`, `D'_i = D_i - L_i D'_{i-1}^{-1} U_{i-1}`, in one
+    `lax.scan` (no pivoting across blocks, as block cyclic reduction; pivoted or
+    closed-form inverses of the B x B blocks). The compiled program holds one
+    elimination step whatever the number of blocks."""
+    L, D, U = mat.lower, mat.diag, mat.upper
+    dinv0 = small_inv(D[0])
+
+    def eliminate(dinv_prev, blocks):
+        lower, diag, upper_prev = blocks
+        w = _mm(lower, dinv_prev)
+        dinv = small_inv(diag - _mm(w, upper_prev))
+        return dinv, (w, dinv)
+
+    _, (w, dinv) = lax.scan(eliminate, dinv0, (L[1:], D[1:], U[:-1]))
+    return ThomasFactor(w, jnp.concatenate([dinv0[None], dinv], axis=0), U)
+
+
+def thomas_solve(fac: ThomasFactor, f):
+    """Solve with a `thomas_factor` factorisation; `f` has shape (N, B)."""
+
+    def forward(z_prev, rows):
+        w, fi = rows
+        z = fi - _mv(w, z_prev)
+        return z, z
+
+    _, z = lax.scan(forward, f[0], (fac.w, f[1:]))
+    z = jnp.concatenate([f[:1], z], axis=0)
+    x_last = _mv(fac.dinv[-1], z[-1])
+
+    def backward(x_next, rows):
+        dinv, zi, upper = rows
+        x = _mv(dinv, zi - _mv(upper, x_next))
+        return x, x
+
+    rows = (fac.dinv[:-1], z[:-1], fac.upper[:-1])
+    _, x = lax.scan(backward, x_last, rows, reverse=True)
+    return jnp.concatenate([x, x_last[None]], axis=0)
+
+
+SEQUENTIAL_MAX_BLOCK = 2
+"""`block_factor` eliminates block-tridiagonal matrices of blocks up to this size
+sequentially (`thomas_factor`), larger ones by block cyclic reduction."""
+
+
+def block_factor(mat: BlockTridiagonal):
+    """The factorisation of a block-tridiagonal matrix for `block_solve`: the block
+    Thomas algorithm for blocks of at most `SEQUENTIAL_MAX_BLOCK` rows on the CPU
+    (its closed-form 2 x 2 inverses make each sequential step a few fused
+    operations: as fast to run as the reduction for the strings measured, and its
+    program, one step in a loop, compiles several times faster than the reduction's
+    unrolled levels), block cyclic reduction otherwise (O(log N) depth, for larger
+    blocks and for accelerators)."""
+    if mat.diag.shape[-1] <= SEQUENTIAL_MAX_BLOCK and jax.default_backend() == "cpu":
+        return thomas_factor(mat)
+    return bcr_factor(mat)
+
+
+@jax.jit
+def block_solve(fac, f):
+    """Solve with a `block_factor` factorisation; `f` has shape (N, B)."""
+    if isinstance(fac, ThomasFactor):
+        return thomas_solve(fac, f)
+    return bcr_solve(fac, f)
+
+
 # `bcr_solve` and `factor` are jitted functions called inside the solvers' traces:
 # diffrax traces a solver's step three times, and a nested jit traces each of these
 # once per shape (a cache hit after that); XLA inlines them, so the compiled program
@@ -517,7 +600,7 @@ class DenseFactor(eqx.Module):
 
 
 class BandedFactor(eqx.Module):
-    fac: BCRFactor
+    fac: Any  # BCRFactor or ThomasFactor (`block_factor`)
     n: int = eqx.field(static=True)
     b: int = eqx.field(static=True)
     N: int = eqx.field(static=True)
@@ -526,7 +609,7 @@ class BandedFactor(eqx.Module):
     def solve(self, rhs):
         flat = rhs.reshape(-1)
         X = jnp.pad(flat, (0, self.N * self.B - flat.size)).reshape(self.N, self.B)
-        x = bcr_solve(self.fac, X)
+        x = block_solve(self.fac, X)
         return x.reshape(-1)[: self.n * self.b].reshape(self.n, self.b)
 
 
@@ -548,7 +631,7 @@ class SecondOrderFactor(eqx.Module):
     Newton iteration fails loudly instead of converging to a wrong root.
     """
 
-    sfac: BCRFactor
+    sfac: Any  # BCRFactor or ThomasFactor (`block_factor`)
     p: BlockTridiagonal  # the v rows' q columns, d x d blocks
     inv_alpha: Array  # (n,): 1 / a
     ratio: Array  # (n,): b / a
@@ -557,7 +640,7 @@ class SecondOrderFactor(eqx.Module):
         d = self.p.b
         r, s = rhs[:, :d], rhs[:, d:]
         rq = s - self.p.matvec(r * self.inv_alpha[:, None])
-        q = bcr_solve(self.sfac, rq)
+        q = block_solve(self.sfac, rq)
         p = r * self.inv_alpha[:, None] - self.ratio[:, None] * q
         return jnp.concatenate([p, q], axis=1)
 
@@ -591,7 +674,7 @@ def second_order_factor(mat: BlockTridiagonal) -> SecondOrderFactor:
         1,
     )
     return SecondOrderFactor(
-        bcr_factor(S), BlockTridiagonal(*P, n, d, 1), inv_alpha, ratio
+        block_factor(S), BlockTridiagonal(*P, n, d, 1), inv_alpha, ratio
     )
 
 
@@ -650,7 +733,7 @@ def _second_order_jacobian_factor(mat: SecondOrderJacobian) -> "SecondOrderFacto
     )
     P = BlockTridiagonal(b * mat.p.lower, b * mat.p.diag, b * mat.p.upper, n, d, 1)
     full = lambda x: jnp.broadcast_to(x, (n,))
-    return SecondOrderFactor(bcr_factor(S), P, full(1.0 / a), full(ratio))
+    return SecondOrderFactor(block_factor(S), P, full(1.0 / a), full(ratio))
 
 
 def declared_second_order(fn, y, args=None) -> int:
@@ -708,7 +791,7 @@ def _factor(mat):
         if mat.second_order:
             return second_order_factor(mat)
         N, B = mat.diag.shape[0], mat.diag.shape[1]
-        return BandedFactor(bcr_factor(mat), mat.n, mat.b, N, B)
+        return BandedFactor(block_factor(mat), mat.n, mat.b, N, B)
     lu, piv = jsl.lu_factor(mat.matrix)
     return DenseFactor(lu, piv)
 

@@ -101,6 +101,35 @@ def test_block_inverse_pivots():
     assert err < 1e-10, err
 
 
+@pytest.mark.parametrize("B", (1, 2, 3))
+def test_block_thomas_and_cyclic_reduction_equal_the_dense_solve(B):
+    # Both eliminations of a block-tridiagonal system (the block Thomas algorithm
+    # for blocks of at most two rows, cyclic reduction above) solve it to rounding;
+    # 13 blocks, so that the reduction has an unpaired last block at some level.
+    rng = np.random.default_rng(B)
+    N = 13
+    L, D, U = (rng.standard_normal((N, B, B)) for _ in range(3))
+    D += 4 * B * np.eye(B)
+    L[0] = U[-1] = 0.0
+    mat = _linalg.BlockTridiagonal(*map(jnp.asarray, (L, D, U)), N, B, 1)
+    dense = np.zeros((N * B, N * B))
+    for i in range(N):
+        dense[i * B : (i + 1) * B, i * B : (i + 1) * B] = D[i]
+        if i:
+            dense[i * B : (i + 1) * B, (i - 1) * B : i * B] = L[i]
+        if i < N - 1:
+            dense[i * B : (i + 1) * B, (i + 1) * B : (i + 2) * B] = U[i]
+    f = rng.standard_normal((N, B))
+    x_ref = np.linalg.solve(dense, f.reshape(-1)).reshape(N, B)
+    fac = jax.jit(_linalg.block_factor)(mat)
+    assert isinstance(fac, _linalg.ThomasFactor) == (B <= 2)
+    for fac in (fac, jax.jit(_linalg.thomas_factor)(mat)):
+        x = np.asarray(_linalg.block_solve(fac, jnp.asarray(f)))
+        assert np.max(np.abs(x - x_ref)) < 1e-13 * np.max(np.abs(x_ref))
+    x = np.asarray(_linalg.bcr_solve(jax.jit(_linalg.bcr_factor)(mat), jnp.asarray(f)))
+    assert np.max(np.abs(x - x_ref)) < 1e-13 * np.max(np.abs(x_ref))
+
+
 # ---------------------------------------------------------------------------
 # The reduced Newton system of a second-order model (q, v rows, dq/dt = v)
 # ---------------------------------------------------------------------------
@@ -132,7 +161,9 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
     )
     shape = jax.eval_shape(fac, y)
     assert isinstance(shape, _linalg.SecondOrderFactor)
-    assert shape.sfac.dinv_last.shape == (dim, dim)  # d x d blocks, not 2d x 2d
+    sfac = shape.sfac
+    inverse = sfac.dinv if isinstance(sfac, _linalg.ThomasFactor) else sfac.dinv_last
+    assert inverse.shape[-2:] == (dim, dim)  # d x d blocks, not 2d x 2d
     n = y.size
     J = dense_jacobian(scene, y)
     rhs = rng.standard_normal(y.shape)
