@@ -36,3 +36,51 @@ def _shared_compilation_cache(tmp_path_factory):
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     yield
     jax.config.update("jax_compilation_cache_dir", None)
+
+
+# Files in the order of their measured cost, costliest first (the last full
+# profile of the default run, experiments/results/suite_profile_tests.csv), so that
+# xdist's file-by-file distribution does not leave one long file running alone at
+# the end; files without a measurement keep their place after the measured ones.
+_PROFILE = (
+    pathlib.Path(__file__).resolve().parents[1]
+    / "experiments"
+    / "results"
+    / "suite_profile_tests.csv"
+)
+
+
+def _file_costs():
+    import csv
+    import io
+
+    costs = {}
+    try:
+        text = _PROFILE.read_text()
+    except OSError:
+        return costs
+    lines = [line for line in text.splitlines() if not line.startswith("#")]
+    rows = csv.DictReader(io.StringIO("\n".join(lines)))
+    for row in rows:
+        try:
+            name, wall = row["test"].split("::")[0], float(row["wall_s"])
+        except (KeyError, ValueError, AttributeError):
+            continue
+        costs[name] = costs.get(name, 0.0) + wall
+    return costs
+
+
+def pytest_collection_modifyitems(config, items):
+    costs = _file_costs()
+    if not costs:
+        return
+    root = pathlib.Path(str(config.rootpath))
+
+    def cost(item):
+        try:
+            name = pathlib.Path(str(item.path)).relative_to(root).as_posix()
+        except ValueError:
+            return 0.0
+        return costs.get(name, 0.0)
+
+    items.sort(key=lambda item: -cost(item))  # stable: a file's tests keep order

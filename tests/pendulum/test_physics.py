@@ -58,7 +58,13 @@ def test_axial_frequency_of_bar_with_tip_mass(formulation):
     assert rel < 0.01, f"{formulation}: omega error {rel:.2e}"
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
+# The natural forms' swing: energy here, their agreement with the displacement
+# string in the slow convergence test; their period among the slow tests.
+@pytest.mark.parametrize(
+    "formulation",
+    ["displacement", *(pytest.param(f, marks=pytest.mark.slow)
+                       for f in ("natural", "angle"))],
+)  # fmt: skip
 def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).
