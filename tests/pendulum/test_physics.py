@@ -58,13 +58,7 @@ def test_axial_frequency_of_bar_with_tip_mass(formulation):
     assert rel < 0.01, f"{formulation}: omega error {rel:.2e}"
 
 
-# The natural forms' swing: energy here, their agreement with the displacement
-# string in the slow convergence test; their period among the slow tests.
-@pytest.mark.parametrize(
-    "formulation",
-    ["displacement", *(pytest.param(f, marks=pytest.mark.slow)
-                       for f in ("natural", "angle"))],
-)  # fmt: skip
+@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
 def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).

@@ -165,10 +165,9 @@ def _err(traj, ref):
     return float(np.max(np.linalg.norm(traj.end_mass - ref.end_mass, axis=1)))
 
 
-# Rodas5P on the string: the default run checks it as BDF's tight reference
-# (test_bdf) and by its order; this comparison runs among the slow tests.
-@pytest.mark.slow
-@pytest.mark.parametrize("formulation", ("displacement", "angle"))
+@pytest.mark.parametrize(
+    "formulation", ("displacement", pytest.param("angle", marks=pytest.mark.slow))
+)
 def test_rodas5p_agrees_with_kvaerno5_reference(formulation):
     ref = _reference(formulation, 6, 1e4, 0.4)
     scene = js.string_pendulum(formulation, k=6, EA=1e4, t1=0.4)
