@@ -1,8 +1,10 @@
 """Compile time of a pendulum simulate (target: below 10 s; no recompilation
 when only parameter values change).
 
-For each solver, in a fresh process (so that nothing is cached from another solver's
-compilation, and JAX's start-up is paid by a tiny warm-up solve first): the first
+For each solver, in a fresh process with jaxstring's compilation cache off
+(``JAXSTRING_CACHE=off``, so that nothing is read from an earlier process or from
+another solver's compilation; JAX's start-up is paid by a tiny warm-up solve first):
+the first
 `simulate` call (trace, lower, XLA compile, run), the same call again (run only),
 and a call with other parameter values (EA x 2, alpha x 2: must not recompile, so
 it costs a run). Compile time = first call - second call. Two modes: the band of
@@ -82,6 +84,7 @@ def main(quick=False):
         for mode in ("declared", "detected"):
             out = subprocess.run(
                 [sys.executable, __file__, "--child", solver, mode, str(k)],
+                env=dict(os.environ, JAXSTRING_CACHE="off"),
                 capture_output=True,
                 text=True,
                 check=True,
