@@ -2,7 +2,8 @@
 
 A chain couples each node to its neighbours only, so the Newton matrix of an implicit
 step is banded (block tridiagonal with one node per block). Factorising it by block
-cyclic reduction costs O(k) per step instead of the O(k^3) of a dense LU.
+elimination (sequential for 2 x 2 blocks, block cyclic reduction for larger ones)
+costs O(k) per step instead of the O(k^3) of a dense LU.
 """
 
 from .banded import (

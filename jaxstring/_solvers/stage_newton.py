@@ -150,7 +150,7 @@ def _stage_model_jacobian(u, args):
 def _identity_like(struct):
     """The factorisation of the identity with the structure `struct` (from
     `eqx.filter_eval_shape` of a factorisation): LU factors and the inverse diagonal
-    blocks of block cyclic reduction are identity matrices (and 1 / a of a
+    blocks of the block eliminations are identity matrices (and 1 / a of a
     `SecondOrderFactor` is 1), pivots are 0, 1, ...,
     and every other array (the reduction's off-diagonal blocks) is zero."""
 
