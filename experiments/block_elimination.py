@@ -4,31 +4,39 @@ Question: a block-tridiagonal Newton matrix can be eliminated from the first blo
 to the last (the block Thomas algorithm, one step in a `lax.scan`) or by block
 cyclic reduction (log2 N levels, unrolled at trace time, each vectorised over its
 blocks). Which compiles faster, which runs faster, for the block sizes of
-jaxstring's chains (2: the reduced 2D displacement string; 3: 3D lines and
-strings; 4: natural variables)? And what does the choice do to whole solves?
+jaxstring's chains (2: the reduced 2D displacement string; 3: 3D strings and
+mooring lines; 6: natural variables)? And what does the choice do to whole
+solves? For 3 x 3 and 4 x 4 blocks, also: the reduction with the blocks inverted
+by pivoted Gauss-Jordan elimination instead of in closed form.
 
 Kernels: a random diagonally dominant block-tridiagonal matrix, factorised and
 solved 200 times in one compiled loop (per-solve time: the loop's time / 200,
-best of 5), and the XLA compilation of that loop; both codes in one process.
-Solves: the string pendulum (displacement variables, 2D, EA = 1e6 N, 2 s,
-rtol = atol = 1e-6) with Kvaerno5 and BDF, each in a fresh process without
-compilation cache, with `block_factor`'s sequential elimination for blocks of up
-to 2 rows (jaxstring's default) and with cyclic reduction for every block size.
+best of 5), and the XLA compilation of that loop; all codes in one process.
+Solves: the string pendulum (EA = 1e6 N, 2 s, rtol = atol = 1e-6; displacement
+variables in 2D and 3D, natural variables) and MoorDyn's WD0050 chain heaved by
+ZZP1_A1 (rtol = atol = 1e-4), each in fresh processes without compilation cache,
+with the block Thomas algorithm for every block size and with cyclic reduction
+for every block size (jaxstring's default: Thomas up to 2 x 2 blocks on the CPU).
 
-Run: ``python experiments/block_elimination.py [--quick]``. Writes
-results/block_elimination.{md,csv} and results/block_elimination_solves.{md,csv}.
+Run: ``python experiments/block_elimination.py [--quick] [--only kernels|solves]``.
+Writes results/block_elimination.{md,csv} and
+results/block_elimination_solves.{md,csv}.
 """
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
 
 import _common as common
+import numpy as np
 
 
-KERNELS = ((10, 2), (40, 2), (160, 2), (10, 3), (40, 3), (40, 4))
+KERNELS = ((10, 2), (40, 2), (160, 2), (10, 3), (40, 3), (160, 3), (40, 4), (40, 6))
+SOLVE_REPEATS = 3
+PIVOTED = "cyclic reduction, pivoted inverses"
 REPS = 200
 
 _CHILD = """
@@ -40,8 +48,15 @@ from jaxstring import _integrate, _linalg
 formulation, solver, k, max_block = sys.argv[1], sys.argv[2], int(sys.argv[3]), \\
     int(sys.argv[4])
 _linalg.banded.SEQUENTIAL_MAX_BLOCK = max_block
-scene = js.string_pendulum(formulation, k=k, EA=1e6, t1=2.0)
-config = js.SolveConfig(solver=solver)
+if formulation == "WD0050":
+    scene = js.lines.read_moordyn(js.lines.case_path("WD0050_Chain.txt"),
+        motion=js.lines.case_path("QuasiStatic/ZZP1_A1.txt"))
+    config = js.SolveConfig(solver=solver, rtol=1e-4, atol=1e-4)
+else:
+    dim = 3 if formulation.endswith("3d") else 2
+    scene = js.string_pendulum(formulation.removesuffix("3d"), k=k, EA=1e6,
+        t1=2.0, dim=dim)
+    config = js.SolveConfig(solver=solver)
 ts = config.save_times(scene.t0, scene.t1)
 t0 = time.perf_counter()
 lowered = _integrate.jit_solve.lower_cpu(scene, config, ts)
@@ -57,7 +72,7 @@ for _ in range(5):
     out = compiled(dynamic)
     jax.block_until_ready(out)
     runs.append(time.perf_counter() - t0)
-end = np.asarray(out.end_mass[-1]).tolist()
+end = np.asarray(out.ys[-1]).ravel().tolist()
 print(json.dumps(dict(trace_s=trace_s, compile_s=compile_s, run_s=min(runs),
                       steps=int(out.stats["num_steps"]), end=end)))
 """
@@ -74,7 +89,12 @@ def _kernel(N, B, code):
     factor, solve = {
         "cyclic reduction": (_linalg.bcr_factor, _linalg.bcr_solve),
         "block Thomas": (_linalg.thomas_factor, _linalg.thomas_solve),
+        PIVOTED: (_linalg.bcr_factor, _linalg.bcr_solve),
     }[code]
+    banded = _linalg.banded
+    closed_form = banded.small_inv
+    if code == PIVOTED:  # the blocks inverted by the pivoted elimination
+        banded.small_inv = banded.pivoted_inverse
     rng = np.random.default_rng(N * 10 + B)
     L, D, U = (rng.standard_normal((N, B, B)) for _ in range(3))
     D += 4 * B * np.eye(B)
@@ -92,16 +112,19 @@ def _kernel(N, B, code):
         return lax.fori_loop(0, REPS, body, jnp.zeros_like(f)) / REPS
 
     jitted = jax.jit(loop, compiler_options=_jit.CPU_COMPILER_OPTIONS)
-    t0 = time.perf_counter()
-    compiled = jitted.lower(mat, f).compile()
-    compile_s = time.perf_counter() - t0
+    try:
+        t0 = time.perf_counter()
+        compiled = jitted.lower(mat, f).compile()
+        compile_s = time.perf_counter() - t0
+        x = np.asarray(jax.jit(lambda m, f: solve(factor(m), f))(mat, f))
+    finally:
+        banded.small_inv = closed_form
     compiled(mat, f).block_until_ready()
     best = float("inf")
     for _ in range(5):
         t0 = time.perf_counter()
         compiled(mat, f).block_until_ready()
         best = min(best, (time.perf_counter() - t0) / REPS)
-    x = np.asarray(solve(jax.jit(factor)(mat), f))
     dense = np.asarray(mat.to_dense()) if hasattr(mat, "to_dense") else None
     err = (
         float(np.max(np.abs(dense @ x.reshape(-1) - np.asarray(f).reshape(-1))))
@@ -111,18 +134,27 @@ def _kernel(N, B, code):
     return dict(compile_s=compile_s, solve_us=best * 1e6, residual=err)
 
 
-def main(quick=False):
+def main(quick=False, only=None):
     common.set_quick(quick)
+    rows = [] if only == "solves" else kernel_table(quick)
+    solves = [] if only == "kernels" else solve_table(quick)
+    return rows, solves
+
+
+def kernel_table(quick):
     kernels = KERNELS[:2] if quick else KERNELS
     rows = []
     for N, B in kernels:
         pair = {}
-        for code in ("cyclic reduction", "block Thomas"):
+        codes = ("cyclic reduction", "block Thomas")
+        if 3 <= B <= 4:
+            codes += (PIVOTED,)
+        for code in codes:
             pair[code] = _kernel(N, B, code)
             rows.append(dict(blocks=N, block_size=B, code=code, **pair[code]))
             print(rows[-1], flush=True)
         ref = pair["cyclic reduction"]
-        for r in rows[-2:]:
+        for r in rows[-len(codes) :]:
             r["compile_vs_reduction"] = r["compile_s"] / ref["compile_s"]
             r["solve_vs_reduction"] = r["solve_us"] / ref["solve_us"]
     columns = [
@@ -144,10 +176,15 @@ def main(quick=False):
             "compile_s: XLA's compilation of a loop of 200 factorisations and solves; "
             "solve_us: one factorisation and solve (the loop's time / 200, best of "
             "5); residual: max |A x - f| of one solve (random diagonally dominant "
-            "blocks). Both codes pivot within the blocks (closed-form inverses "
-            "up to 2 x 2), not across them.",
+            "blocks). The blocks are inverted in closed form up to 4 x 4 (pivoted "
+            "Gauss-Jordan elimination above, and in the rows 'pivoted inverses'); "
+            "no code pivots across blocks.",
         ],
     )
+    return rows
+
+
+def solve_table(quick):
     solves = []
     k = 10 if quick else 40
     programs = (
@@ -156,37 +193,62 @@ def main(quick=False):
         else (
             ("displacement", "kvaerno5"),
             ("displacement", "bdf"),
+            ("displacement3d", "kvaerno5"),
+            ("displacement3d", "bdf"),
+            ("WD0050", "kvaerno5"),
+            ("natural", "kvaerno5"),
         )
     )
+    modes = (("cyclic reduction", 0), ("block Thomas", 8))
     for formulation, solver in programs:
+        # Fresh processes, the two eliminations alternating, REPEATS times each: the
+        # median compile time and the best run (the machine is shared).
+        runs = {label: [] for label, _ in modes}
+        for _ in range(1 if quick else SOLVE_REPEATS):
+            for label, max_block in modes:
+                out = subprocess.run(
+                    [
+                        sys.executable,
+                        "-c",
+                        _CHILD,
+                        formulation,
+                        solver,
+                        str(k),
+                        str(max_block),
+                    ],  # fmt: skip
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                    env=dict(os.environ, JAXSTRING_CACHE="off"),
+                )
+                runs[label].append(json.loads(out.stdout.strip().splitlines()[-1]))
         base = None
-        for label, max_block in (("cyclic reduction", 0), ("block Thomas", 2)):
-            out = subprocess.run(
-                [
-                    sys.executable,
-                    "-c",
-                    _CHILD,
-                    formulation,
-                    solver,
-                    str(k),
-                    str(max_block),
-                ],  # fmt: skip
-                capture_output=True,
-                text=True,
-                check=True,
+        for label, _ in modes:
+            rs = runs[label]
+            r = dict(
+                trace_s=float(np.median([x["trace_s"] for x in rs])),
+                compile_s=float(np.median([x["compile_s"] for x in rs])),
+                run_s=min(x["run_s"] for x in rs),
+                steps=rs[0]["steps"],
+                end=rs[0]["end"],
             )
-            r = json.loads(out.stdout.strip().splitlines()[-1])
             base = base or r
-            gap = max(abs(a - b) for a, b in zip(r["end"], base["end"]))
+            scale = max(abs(b) for b in base["end"])
+            gap = max(abs(a - b) for a, b in zip(r["end"], base["end"])) / scale
+            program = (
+                "WD0050 + ZZP1_A1"
+                if formulation == "WD0050"
+                else (f"{formulation} k = {k}")
+            )
             solves.append(
                 dict(
-                    program=f"{formulation} {solver}, k = {k}",
+                    program=f"{program}, {solver}",
                     elimination=label,
                     trace_s=r["trace_s"],
                     compile_s=r["compile_s"],
                     run_s=r["run_s"],
                     steps=r["steps"],
-                    end_mass_gap_m=gap,
+                    end_state_gap=gap,
                     compile_vs_reduction=r["compile_s"] / base["compile_s"],
                     run_vs_reduction=r["run_s"] / base["run_s"],
                 )
@@ -196,19 +258,24 @@ def main(quick=False):
         "block_elimination_solves",
         solves,
         list(solves[0]),
-        "Whole solves: the reduced 2 x 2 systems eliminated by block Thomas or by "
-        "cyclic reduction",
+        "Whole solves: the Newton systems eliminated by block Thomas or by cyclic "
+        "reduction",
         [
-            "Each row a fresh process without compilation cache; compile_s: XLA's "
-            "compilation of the lowered solve (tracing apart: trace_s); run_s: best "
-            "of 5 runs of the compiled solve; end_mass_gap_m: the end mass's "
-            "largest coordinate difference at 2 s from the cyclic-reduction row.",
+            "Each program run in 3 fresh processes per elimination (alternating), "
+            "without compilation cache; compile_s: XLA's compilation of the lowered "
+            "solve, the median (tracing apart: trace_s); run_s: the best of 5 runs "
+            "of the compiled solve in any of them; end_state_gap: the largest "
+            "difference of the final state from the cyclic-reduction row, relative "
+            "to its largest entry. Block sizes: displacement 2 x 2 (reduced to the "
+            "velocities), displacement3d and WD0050 3 x 3, natural 6 x 6.",
         ],
     )
-    return rows, solves
+    return solves
 
 
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
-    main(quick=p.parse_args().quick)
+    p.add_argument("--only", choices=("kernels", "solves"), help="one of the tables")
+    a = p.parse_args()
+    main(quick=a.quick, only=a.only)

@@ -32,6 +32,7 @@ from .banded import (
     factor as factor,
     jacobian as jacobian,
     model_jacobian as model_jacobian,
+    pivoted_inverse as pivoted_inverse,
     second_order_factor as second_order_factor,
     small_inv as small_inv,
     thomas_factor as thomas_factor,

@@ -18,8 +18,9 @@ all of their work. This module gives, for a function ``fn: (n, b) -> (n, b)``:
   in a row), never materialising the n x n matrix.
 * ``bcr_factor`` / ``bcr_solve``: block cyclic reduction, O(N B^3) work and
   O(log N) sequential depth, fully vectorised over blocks (no ``lax.scan``; the
-  levels are unrolled at trace time). It pivots within the B x B blocks (``inv``)
-  but not across blocks: fine for the Newton matrices ``I - h gamma J`` of
+  levels are unrolled at trace time). It inverts the B x B blocks (``small_inv``:
+  closed form up to 4 x 4, pivoted elimination above) and does not pivot across
+  blocks: fine for the Newton matrices ``I - h gamma J`` of
   mechanical chains, whose reduced matrices are (scaled) symmetric positive
   definite; ``tests/solvers/test_linalg.py`` checks it against the dense solve.
 * ``thomas_factor`` / ``thomas_solve``: the block Thomas algorithm (elimination
@@ -407,28 +408,66 @@ def _fit(x, length):
     return jnp.concatenate([x, z], axis=0)
 
 
+def _det(m):
+    """Determinant of a (small) matrix given as nested lists of arrays, by Laplace
+    expansion along its first row."""
+    if len(m) == 1:
+        return m[0][0]
+    if len(m) == 2:
+        return m[0][0] * m[1][1] - m[0][1] * m[1][0]
+    terms = [
+        (-1) ** j * m[0][j] * _det([row[:j] + row[j + 1 :] for row in m[1:]])
+        for j in range(len(m))
+    ]
+    return sum(terms[1:], terms[0])
+
+
+def _adjugate_inverse(a):
+    """Inverse of a batch of 2 x 2, 3 x 3 or 4 x 4 matrices as adjugate / determinant.
+
+    No pivoting is needed: the cofactors are sums of products with one entry from
+    each of the other rows and columns, so scaling a row or a column of `a` scales
+    every term of a cofactor alike (no cancellation from badly scaled rows); the
+    result is as accurate as a pivoted elimination for the well-conditioned blocks
+    of chain Newton matrices (tests/solvers/test_linalg.py)."""
+    B = a.shape[-1]
+    e = [[a[..., i, j] for j in range(B)] for i in range(B)]
+
+    def minor(i, j):
+        return [row[:j] + row[j + 1 :] for k, row in enumerate(e) if k != i]
+
+    cof = [[(-1) ** (i + j) * _det(minor(i, j)) for j in range(B)] for i in range(B)]
+    det = sum((e[0][j] * cof[0][j] for j in range(1, B)), e[0][0] * cof[0][0])
+    adj = jnp.stack(
+        [jnp.stack([cof[j][i] for j in range(B)], -1) for i in range(B)], -2
+    )
+    return adj / det[..., None, None]
+
+
 def small_inv(a):
+    """Inverse of a batch of small matrices `(..., B, B)`: in closed form
+    (`_adjugate_inverse`) up to 4 x 4, by `pivoted_inverse` up to 8 x 8 and by
+    LAPACK above (timings: docs/numerics.md, "Banded linear algebra")."""
+    B = a.shape[-1]
+    if B == 1:
+        return 1.0 / a
+    if B <= 4:
+        return _adjugate_inverse(a)
+    if B > 8:
+        return jnp.linalg.inv(a)
+    return pivoted_inverse(a)
+
+
+def pivoted_inverse(a):
     """Inverse of a batch of small matrices `(..., B, B)` by Gauss-Jordan elimination
     with partial pivoting, unrolled over the B columns, with the batch as the last
     (contiguous) axis so that every operation is vectorised over the batch.
 
     XLA:CPU lowers ``jnp.linalg.inv`` to one LAPACK call per matrix of the batch;
-    for the 3 x 3 ... 8 x 8 blocks of a string these elementwise ops (which XLA
-    fuses) are faster, and above 8 x 8 LAPACK is used (timings: docs/numerics.md,
-    "Banded linear algebra").
+    for the 5 x 5 ... 8 x 8 blocks of a string these elementwise ops (which XLA
+    fuses) are faster.
     """
     B = a.shape[-1]
-    if B == 1:
-        return 1.0 / a
-    if B == 2:
-        # Closed form (the adjugate over the determinant): a handful of fused
-        # elementwise ops instead of an unrolled elimination.
-        p, q, r, s = a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1]
-        det = p * s - q * r
-        adj = jnp.stack([jnp.stack([s, -q], -1), jnp.stack([-r, p], -1)], -2)
-        return adj / det[..., None, None]
-    if B > 8:
-        return jnp.linalg.inv(a)
     batch = a.shape[:-2]
     x = jnp.moveaxis(a.reshape((-1, B, B)), 0, -1)  # (B, B, m)
     eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype)[:, :, None], x.shape)
@@ -448,7 +487,7 @@ def small_inv(a):
 
 def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
     """Block cyclic reduction of a block-tridiagonal matrix (no pivoting across
-    blocks; pivoted inverses of the B x B blocks).
+    blocks; the B x B blocks inverted by `small_inv`).
 
     One level eliminates the odd-numbered blocks: with `a = L_i D_{i-1}^{-1}` and
     `c = U_i D_{i+1}^{-1}`, even row i becomes
@@ -484,8 +523,8 @@ class ThomasFactor(eqx.Module):
 def thomas_factor(mat: BlockTridiagonal) -> ThomasFactor:
     """Block Gaussian elimination from the first block to the last (the block Thomas
     algorithm): `D'_0 = D_0`, `D'_i = D_i - L_i D'_{i-1}^{-1} U_{i-1}`, in one
-    `lax.scan` (no pivoting across blocks, as block cyclic reduction; pivoted or
-    closed-form inverses of the B x B blocks). The compiled program holds one
+    `lax.scan` (no pivoting across blocks, as block cyclic reduction; `small_inv`
+    inverses of the B x B blocks). The compiled program holds one
     elimination step whatever the number of blocks."""
     L, D, U = mat.lower, mat.diag, mat.upper
     dinv0 = small_inv(D[0])

@@ -83,8 +83,7 @@ def _check_method(method):
         raise ValueError(f"`method` must be one of {sorted(_METHODS)}; got {method!r}.")
 
 
-@eqx.filter_jit
-def _solve_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
+def _solve_batch_body(scene, q0s, rtol, atol, max_steps, method="newton"):
     cls, use_flag = _METHODS[method]
     solver = cls(rtol=rtol, atol=atol)
 
@@ -98,6 +97,9 @@ def _solve_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
     q, ok = jax.vmap(one)(q0s)
     res = jax.vmap(lambda q: jnp.max(jnp.abs(residual(q, scene))))(q)
     return q, ok, res
+
+
+_solve_batch = eqx.filter_jit(_solve_batch_body)
 
 
 def solve_equilibria(
@@ -229,11 +231,10 @@ def _hawser(scene):
     return hs[0]
 
 
-@eqx.filter_jit
 def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
     """Solve from all starts and evaluate tension, clearance and Jacobian of each
-    solution, in one compiled call."""
-    q, ok, res = _solve_batch(scene, q0s, rtol, atol, max_steps, method)
+    solution (the body of `_equilibria_map`'s compiled call)."""
+    q, ok, res = _solve_batch_body(scene, q0s, rtol, atol, max_steps, method)
     hawser = _hawser(scene)
     ys = jax.vmap(lambda q: state_from_q(q, 2))(q)
 
@@ -244,6 +245,19 @@ def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
 
     T, clr, J = jax.vmap(props)(ys)
     return ys, ok & (res < 1e-6), T, clr, J
+
+
+@eqx.filter_jit
+def _equilibria_map(scenes, n_grid, rtol, atol, max_steps, method):
+    """`_equilibria_batch` from the `grid_starts` of each of a batch of scenes,
+    vmapped inside one compiled call (a vmap of a compiled function would trace its
+    body twice: once, then batched)."""
+
+    def one(scene):
+        q0s = grid_starts(scene, n_grid)
+        return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
+
+    return eqx.filter_vmap(one)(scenes)
 
 
 def _collect(ys, ok, T, clr, J, taut_tension):
@@ -321,11 +335,7 @@ def find_equilibria_map(scenes, **options):
 def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     _check_method(method)
     batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
-    q0s = jnp.stack([grid_starts(sc, n_grid) for sc in scenes])
-    solve = eqx.filter_vmap(
-        lambda sc, q0: _equilibria_batch(sc, q0, rtol, atol, max_steps, method)
-    )
-    out = solve(batch, q0s)
+    out = _equilibria_map(batch, n_grid, rtol, atol, max_steps, method)
     return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
 
 
