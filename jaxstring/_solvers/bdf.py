@@ -290,12 +290,15 @@ class BDF(dfx.AbstractAdaptiveSolver):
     def _width(self, terms, t, y, args):
         return _linalg.choose_structure(_VF(), y, (t, terms, args), self.linear_solver)
 
-    def _jacobian(self, terms, t, y, args, width):
+    def _jacobian(self, terms, t, y, args, width, shape_only=False):
+        """J(t, y); `shape_only`: for its structure only (`jax.eval_shape`), the
+        identity's Jacobian, of the same structure, without the vector field's
+        JVPs."""
         if width == 1:
             jac = _linalg.model_jacobian(terms, t, y, args)
             if jac is not None:
                 return lax.stop_gradient(jac)
-        fn = lambda u: terms.vf(t, u, args)
+        fn = (lambda u: u) if shape_only else (lambda u: terms.vf(t, u, args))
         _, lin = jax.linearize(fn, y)
         so = _linalg.declared_second_order(_VF(), y, (t, terms, args))
         return lax.stop_gradient(_linalg.jacobian(fn, y, width, lin, so))
@@ -312,12 +315,12 @@ class BDF(dfx.AbstractAdaptiveSolver):
         # c_lu = inf, which the first step sees as a changed c and so factorises
         # afresh at its predictor. (One Jacobian and factorisation fewer in the
         # compiled program: each is a few hundred XLA operations.)
-        fresh = lambda: _linalg.factor(
-            self._jacobian(terms, t0, y0, args, width).scale_shift(1.0, -h)
+        structure = lambda: _linalg.factor(
+            self._jacobian(terms, t0, y0, args, width, True).scale_shift(1.0, -h)
         )
         lu = None
         if self.reuse_jacobian:
-            shapes = jax.eval_shape(fresh)
+            shapes = jax.eval_shape(structure)
             lu = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
         return BDFState(
             D=self._start(terms, t0, h, y0, args),

@@ -118,11 +118,13 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         # f at the step's start: the last stage of the step before (FSAL)
         return terms.vf(t0, y0, args)
 
-    def _factor(self, terms, t, y, args, hg, width, second_order):
-        """The factorisation of I - h gamma J(t, y) (no gradient)."""
+    def _factor(self, terms, t, y, args, hg, width, second_order, shape_only=False):
+        """The factorisation of I - h gamma J(t, y) (no gradient). `shape_only`:
+        for its structure only (`jax.eval_shape`), from the identity's Jacobian,
+        which has the same structure, without tracing the vector field's JVPs."""
         jac = _linalg.model_jacobian(terms, t, y, args) if width == 1 else None
         if jac is None:
-            fn = lambda u: terms.vf(t, u, args)
+            fn = (lambda u: u) if shape_only else (lambda u: terms.vf(t, u, args))
             jac = _linalg.jacobian(fn, y, width, second_order=second_order)
         return lax.stop_gradient(_linalg.factor(jac.scale_shift(1.0, -hg)))
 
@@ -152,7 +154,9 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             A[i, :i], P[i, :i] = tab.a[i - 1], tab.a_pred[i - 1]
         A, P, C = (jnp.asarray(x, dtype) for x in (A, P, np.asarray(tab.c)))
         combine = lambda row, fs: jnp.tensordot(row, fs, axes=1)
-        shapes = jax.eval_shape(lambda: factor(t0, y0))
+        shapes = jax.eval_shape(
+            lambda: self._factor(terms, t0, y0, args, hg, width, second_order, True)
+        )
         placeholder = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
 
         def attempt(_, carry):

@@ -46,6 +46,7 @@ state is node-major with a narrow band and large enough, and a dense ``jacfwd`` 
 LU otherwise; ``"dense"`` and ``"banded"`` force one path.
 """
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Any
@@ -226,16 +227,21 @@ class StageNewton(optx.AbstractRootFinder):
         remaining = jnp.maximum(self.max_iters - done, 0)
         return (rate < 1) & (rate**remaining / (1 - rate) * size > self.kappa)
 
-    def _factor(self, fn, y, args):
+    def _factor(self, fn, y, args, shape_only=False):
+        """The factorised Jacobian of `fn(., args)` at `y`. With `shape_only` (for
+        `eqx.filter_eval_shape`: the factorisation's structure only) the probed
+        Jacobian is the identity's, whose structure is the same, so that taking
+        the structure does not trace the relation's JVPs."""
         noaux = _NoAux(fn)
         if self.linear_solver in BATCHED_LINEAR_SOLVERS:
-            fac = batched_factor(noaux, y, args, self.linear_solver)
+            fac = batched_factor(noaux, y, args, self.linear_solver, shape_only)
             return lax.stop_gradient(fac)
         width = _linalg.choose_structure(noaux, y, args, self.linear_solver)
         jac = _stage_model_jacobian(y, args) if width == 1 else None
         if jac is None:
             so = _linalg.declared_second_order(noaux, y, args)
-            jac = _linalg.jacobian(lambda u: noaux(u, args), y, width, second_order=so)
+            relation = (lambda u: u) if shape_only else (lambda u: noaux(u, args))
+            jac = _linalg.jacobian(relation, y, width, second_order=so)
         fac = _linalg.factor(jac)
         return lax.stop_gradient(fac)
 
@@ -255,7 +261,10 @@ class StageNewton(optx.AbstractRootFinder):
             # With `first_jacobian_in_step` the first iteration's refresh takes
             # the Jacobian at the same point, so that the compiled solve holds one
             # copy of the Jacobian's program instead of two.
-            fac = _identity_like(eqx.filter_eval_shape(self._factor, fn, y, args))
+            shape = eqx.filter_eval_shape(
+                functools.partial(self._factor, shape_only=True), fn, y, args
+            )
+            fac = _identity_like(shape)
         else:
             fac = self._factor(fn, y, args)
         deferred = later and not explicit
@@ -421,7 +430,7 @@ class BatchedBandedFactor(eqx.Module):
         return jax.vmap(lambda f, r: f.solve(r))(self.fac, rhs)
 
 
-def batched_factor(fn, y, args, linear_solver: str = "batched"):
+def batched_factor(fn, y, args, linear_solver: str = "batched", shape_only=False):
     """Factorise the Jacobian of `fn(., args)` at `y`, for a `y` of shape
     `(M, ...)` that stacks M independent members (member i of `fn` depends only on
     member i of `y`): the Jacobian is block-diagonal, so it is never formed as an
@@ -433,6 +442,7 @@ def batched_factor(fn, y, args, linear_solver: str = "batched"):
     structure of one member is chosen as `choose_structure` does for a single
     solve: `linear_solver` "batched" = "auto", "batched_dense", "batched_banded").
     The blocks are then factorised by a vmapped LU or block cyclic reduction.
+    `shape_only`: as `StageNewton._factor`'s (the identity's Jacobian).
     """
     inner = BATCHED_LINEAR_SOLVERS[linear_solver]
     M = y.shape[0]
@@ -440,7 +450,8 @@ def batched_factor(fn, y, args, linear_solver: str = "batched"):
     width = _linalg.choose_structure(member, y[0], args, inner)
     if isinstance(width, _linalg.BorderedWidth):
         width = None  # members of a bordered structure: dense blocks
-    _, lin = jax.linearize(lambda u: fn(u, args), y)
+    relation = (lambda u: u) if shape_only else (lambda u: fn(u, args))
+    _, lin = jax.linearize(relation, y)
     if width is None:
         m = math.prod(y.shape[1:])
         seeds = jnp.eye(m, dtype=y.dtype).reshape((m,) + y.shape[1:])
