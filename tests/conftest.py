@@ -11,10 +11,11 @@ import jaxstring  # noqa: E402, F401  (float64 on)
 
 
 # JAX's persistent compilation cache. JAXSTRING_TEST_CACHE=<dir> keeps one across
-# local runs. Otherwise the two xdist workers of a run share one in the run's
-# temporary folder (pytest keeps the last three): a program that one worker
-# compiled (the same scene structure and solver in another test file) is read
-# back by the other instead of compiled again; nothing is read from or written to
+# local runs. Otherwise the two xdist workers of a run, and the processes their
+# tests start, share one in the run's temporary folder (pytest keeps the last
+# three): a program that one process compiled (the same scene structure and
+# solver in another test file) is read back by the others instead of compiled
+# again; nothing is read from or written to
 # the user's ~/.cache/jaxstring (JAXSTRING_CACHE=off: jaxstring's own default
 # cache stays off, in this process and in the processes the tests start).
 _cache = os.environ.get("JAXSTRING_TEST_CACHE")
@@ -31,11 +32,24 @@ def _shared_compilation_cache(tmp_path_factory):
         run = base.parent if base.name.startswith("popen-gw") else base
         folder = run / "jax-compilation-cache"
     folder.mkdir(parents=True, exist_ok=True)
-    jax.config.update("jax_compilation_cache_dir", str(folder))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    settings = {
+        "jax_compilation_cache_dir": str(folder),
+        "jax_persistent_cache_min_compile_time_secs": 1.0,
+        "jax_persistent_cache_min_entry_size_bytes": 0,
+    }
+    for name, value in settings.items():
+        jax.config.update(name, value)
+    # ... and the processes the tests start (the command, worker pools,
+    # jax.distributed processes, the README's examples) share it too.
+    saved = {name.upper(): os.environ.get(name.upper()) for name in settings}
+    os.environ.update({name.upper(): str(v) for name, v in settings.items()})
     yield
     jax.config.update("jax_compilation_cache_dir", None)
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 # Files in the order of their measured cost, costliest first (the last full

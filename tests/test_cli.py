@@ -58,11 +58,14 @@ def test_command_caches_the_compiled_solve(tmp_path):
     if not os.path.exists(exe):
         pytest.skip("the jaxstring command is not installed beside this python")
     cache = tmp_path / "cache"
-    # (the tests' JAXSTRING_CACHE=off left out: the command's default is on)
+    # (the tests' JAXSTRING_CACHE=off and shared JAX cache left out: the
+    # command's default is on, in its own folder)
     env = {
         k: v
         for k, v in os.environ.items()
         if k not in ("EQX_ON_ERROR", "JAXSTRING_CACHE")
+        and not k.startswith("JAX_PERSISTENT_CACHE")
+        and k != "JAX_COMPILATION_CACHE_DIR"
     }
     env["JAXSTRING_CACHE_DIR"] = str(cache)
     cmd = [exe, *FAST, "--out", str(tmp_path / "out")]

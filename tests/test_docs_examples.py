@@ -14,7 +14,6 @@ import re
 import subprocess
 import sys
 
-import jax
 import pytest
 
 
@@ -69,15 +68,6 @@ def test_code_blocks_run_in_order(document, tmp_path):
     for written, run in FAST[document]:
         script = script.replace(written, run)
     env = dict(os.environ, MPLBACKEND="Agg", JAXSTRING_CACHE="off")
-    # The test run's shared compilation cache (tests/conftest.py): the script's
-    # programs are read from it when another test compiled them, and saved to it.
-    cache = jax.config.jax_compilation_cache_dir
-    if cache:
-        env.update(
-            JAX_COMPILATION_CACHE_DIR=str(cache),
-            JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1",
-            JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
-        )
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
     out = subprocess.run(
         [sys.executable, "-c", script],
