@@ -1,7 +1,9 @@
 """The one process-wide setting jaxstring makes on import, and the compilation cache.
 
 * float64 everywhere (``jax_enable_x64``): stiff strings (EA up to 1e9) lose all
-  accuracy in float32. This is the only setting `import jaxstring` changes.
+  accuracy in float32. This is the only setting `import jaxstring` changes (with
+  one jit-cache context of its own, `NAN_CHECKS_CONTEXT`: like float64, it makes a
+  function jitted before `import jaxstring` trace once more).
 * OpenBLAS threads are limited inside jaxstring's own calls only
   (`jaxstring._blas`); XLA:CPU's YNNPACK fusions are turned off per compilation
   for the solves (``jaxstring._jit``).
@@ -25,6 +27,15 @@ import jax  # noqa: E402
 
 
 jax.config.update("jax_enable_x64", True)
+
+# A jit-cache context of jaxstring's own (programs traced to be saved for worker
+# processes: `jaxstring._solvers.diffrax_compat.checks_as_nan`). Creating a context
+# adds an entry to every jit cache key in the process, so that every function
+# jitted before it traces again once: it is created here, on import beside
+# float64 (which does the same), not at the first solve, where it made the user's
+# and jaxstring's own earlier compiled calls (a deck's static state) trace again.
+# JAX does not create user contexts safely while other threads trace either.
+NAN_CHECKS_CONTEXT = jax.make_user_context(default_value=False)
 
 
 def default_cache_dir() -> str:

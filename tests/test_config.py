@@ -99,3 +99,37 @@ def test_solves_run_under_the_limit(monkeypatch):
     scene = js.pendulum.string_pendulum(k=3, t1=0.05)
     js.simulate(scene, n_save=3)
     assert calls == [1]
+
+
+_RETRACE_PROBE = """
+import json
+import jax, jax.numpy as jnp
+import jaxstring as js
+traces = []
+@jax.jit
+def users(x):
+    traces.append(1)
+    return 2.0 * x
+users(jnp.ones(3))
+scene = js.pendulum.string_pendulum(k=3, t1=0.05)
+js.simulate(scene, n_save=3)  # jaxstring's first solve imports its solvers
+users(jnp.ones(3))
+print(json.dumps(len(traces)))
+"""
+
+
+def test_first_solve_does_not_retrace_earlier_compiled_functions():
+    # Every jit cache context created in a process is part of every jit cache key;
+    # jaxstring creates its own on import, so that its first solve leaves the
+    # functions jitted after `import jaxstring` (the user's, a deck's static
+    # solve) compiled: called again, they are not traced again.
+    env = dict(os.environ, JAXSTRING_CACHE="off")
+    out = subprocess.run(
+        [sys.executable, "-c", _RETRACE_PROBE],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == 1

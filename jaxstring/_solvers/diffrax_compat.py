@@ -34,6 +34,8 @@ import diffrax as dfx
 import equinox.internal as eqxi
 import jax
 
+from .._config import NAN_CHECKS_CONTEXT
+
 
 TESTED = ((0, 7, 2), (0, 8, 0))  # >= 0.7.2, < 0.8
 
@@ -165,9 +167,9 @@ def save_times_checked():
 
 
 # A jit cache context of its own for programs traced by `checks_as_nan`, so that
-# no part traced before with host callbacks is reused (created at import: JAX
-# does not create user contexts safely while other threads trace).
-_NAN_CHECKS = jax.make_user_context(default_value=False)
+# no part traced before with host callbacks is reused (created on `import
+# jaxstring`: see `jaxstring._config`).
+_NAN_CHECKS = NAN_CHECKS_CONTEXT
 
 
 @contextlib.contextmanager
