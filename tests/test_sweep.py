@@ -86,7 +86,8 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
         assert len(jax.devices()) == 2
         base = js.string_pendulum(k=3, EA=1e3, alpha=0.02, t1=0.2)
         fn = lambda traj, s: traj.obs["positions"][-1, -1, :]
-        kw = dict(rtol=1e-9, atol=1e-9, n_save=11)
+        # groups of 3 members: two groups, one per device
+        kw = dict(rtol=1e-9, atol=1e-9, n_save=11, batch_size=3)
         v = {"alpha": [0.01, 0.02, 0.04], "EA": [1e3, 2e3]}
         two = sweep(base, v, fn, grid=True, **kw)
         one = sweep(base, v, fn, grid=True, devices=1, **kw)
