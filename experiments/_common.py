@@ -39,6 +39,7 @@ from harness import (  # noqa: F401  (re-exported: the experiments' one writer)
     MAX_STEPS,
     RESULTS,
     block,
+    child_json,
     clock,
     end_mass_error,
     fmt,

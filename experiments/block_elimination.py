@@ -24,10 +24,6 @@ results/block_elimination_solves.{md,csv}.
 """
 
 import argparse
-import json
-import os
-import subprocess
-import sys
 import time
 
 import _common as common
@@ -206,22 +202,11 @@ def solve_table(quick):
         runs = {label: [] for label, _ in modes}
         for _ in range(1 if quick else SOLVE_REPEATS):
             for label, max_block in modes:
-                out = subprocess.run(
-                    [
-                        sys.executable,
-                        "-c",
-                        _CHILD,
-                        formulation,
-                        solver,
-                        str(k),
-                        str(max_block),
-                    ],  # fmt: skip
-                    capture_output=True,
-                    text=True,
-                    check=True,
-                    env=dict(os.environ, JAXSTRING_CACHE="off"),
-                )
-                runs[label].append(json.loads(out.stdout.strip().splitlines()[-1]))
+                r = common.child_json(
+                    _CHILD, formulation, solver, k, max_block,
+                    env={"JAXSTRING_CACHE": "off"},
+                )  # fmt: skip
+                runs[label].append(r)
         base = None
         for label, _ in modes:
             rs = runs[label]

@@ -15,8 +15,6 @@ results/compile_options.{md,csv}.
 
 import argparse
 import json
-import subprocess
-import sys
 
 import _common as common
 
@@ -78,21 +76,9 @@ def main(quick=False):
         formulation, solver = PROGRAMS[prog]
         base = None
         for name in options:
-            out = subprocess.run(
-                [
-                    sys.executable,
-                    "-c",
-                    _CHILD,
-                    formulation,
-                    solver,
-                    str(k),
-                    json.dumps(OPTIONS[name]),
-                ],  # fmt: skip
-                capture_output=True,
-                text=True,
-                check=True,
+            r = common.child_json(
+                _CHILD, formulation, solver, k, json.dumps(OPTIONS[name])
             )
-            r = json.loads(out.stdout.strip().splitlines()[-1])
             base = base or r
             row = dict(
                 program=prog,

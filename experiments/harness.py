@@ -115,6 +115,24 @@ def block(x):
     return jax.block_until_ready(x)
 
 
+def child_json(code: str, *args, env=None) -> dict:
+    """Run `code` in a fresh Python process (`python -c code args...`, with `env`
+    added to this process's environment) and return the JSON its last line of
+    output prints: a measurement free of this process's caches."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)],
+        capture_output=True,
+        text=True,
+        check=True,
+        env=dict(os.environ, **(env or {})),
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 # ---------------------------------------------------------------------------
 # The stamp and the writer
 
