@@ -109,3 +109,16 @@ def eager_jit(fun):
         return jitted(*args, **kwargs)
 
     return wrapper
+
+
+def traced_once(step):
+    """A diffrax solver's `step` method as a nested jitted function, inlined where
+    it is called, so that JAX keeps its trace.
+
+    diffrax traces the body of its step loop up to three times per solve (twice
+    under `eval_shape`, to learn which parts of the loop state stay static, then in
+    the loop itself). A jitted function called again with arguments of the same
+    structure is not traced again, so the step (stages, Newton iterations,
+    Jacobians) is traced once. The compiled program computes the same: the
+    inlined trace is the one that would have been made."""
+    return eqx.filter_jit(step, inline=True)

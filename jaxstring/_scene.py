@@ -1,5 +1,7 @@
 """A scene: model, effects, environment, initial state and time span."""
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -146,6 +148,14 @@ class Scene(eqx.Module):
 
 def scene_vector_field(t, y, scene: Scene):
     """diffrax-style vector field: the scene travels as `args`, never closed over."""
+    return _traced_vector_field(t, y, scene)
+
+
+@functools.partial(eqx.filter_jit, inline=True)
+def _traced_vector_field(t, y, scene):
+    # Jitted (and inlined where it is called) so that its trace is kept: a solve
+    # calls the vector field from many places (stages, Jacobians, the solver's
+    # start) with arguments of one structure, and traces it once.
     return scene.vector_field(t, y)
 
 

@@ -94,6 +94,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _linalg
+from .._jit import traced_once
 
 
 MAX_ORDER = 5
@@ -334,6 +335,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             n_refresh=jnp.array(0, jnp.int32),
         )
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         st = solver_state
         dtype = y0.dtype

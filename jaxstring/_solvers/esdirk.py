@@ -56,6 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _linalg
+from .._jit import traced_once
 from .fixed_step import OneStepODESolver, _rms
 from .rosenbrock import _VF
 
@@ -128,6 +129,7 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             jac = _linalg.jacobian(fn, y, width, second_order=second_order)
         return lax.stop_gradient(_linalg.factor(jac.scale_shift(1.0, -hg)))
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         tab = TABLEAUX[self.method]
         dtype = y0.dtype

@@ -39,6 +39,7 @@ import jax.lax as lax
 import jax.numpy as jnp
 
 from .. import _linalg
+from .._jit import traced_once
 
 
 NEWTON_KINDS = ("chord", "full")
@@ -325,6 +326,7 @@ class ThetaMethod(_NewtonFixedStep):
         # (previous increment, previous step size); h = 0: no previous step.
         return jnp.zeros_like(y0), jnp.zeros((), jnp.result_type(t0, t1))
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         h = t1 - t0
         f0 = terms.vf(t0, y0, args)
@@ -379,6 +381,7 @@ class Newmark(_NewtonFixedStep):
             )
         return None
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump
         h = t1 - t0

@@ -3,9 +3,11 @@
 from typing import ClassVar
 
 import diffrax as dfx
+import equinox as eqx
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
+from .._jit import traced_once
 from .._validate import check_choice
 from .bdf import BDF
 from .diffrax_compat import EVERY_STAGE
@@ -75,19 +77,39 @@ _MAX_ITERS_ADAPTIVE = 10
 # cheaper steps: docs/numerics.md, "Kvaerno written out"); the classes below remain
 # for a Jacobian per stage and for `sweep`'s lockstep mode, whose stage solves
 # factorise per member (`StageNewton(linear_solver="batched")`).
-class Kvaerno3(dfx.Kvaerno3):
+class _TracedStep(eqx.Module):
+    """A diffrax solver whose step is traced once per solve (`traced_once`)."""
+
+    @traced_once
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        return super().step(terms, t0, t1, y0, args, solver_state, made_jump)
+
+
+class _StepKvaerno3(_TracedStep, dfx.Kvaerno3):
+    """diffrax's Kvaerno3: one Jacobian per step."""
+
+
+class _StepKvaerno4(_TracedStep, dfx.Kvaerno4):
+    """diffrax's Kvaerno4: one Jacobian per step."""
+
+
+class _StepKvaerno5(_TracedStep, dfx.Kvaerno5):
+    """diffrax's Kvaerno5: one Jacobian per step."""
+
+
+class Kvaerno3(_StepKvaerno3):
     """diffrax's Kvaerno3 with a Jacobian at every implicit stage's predictor."""
 
     calculate_jacobian: ClassVar = EVERY_STAGE
 
 
-class Kvaerno4(dfx.Kvaerno4):
+class Kvaerno4(_StepKvaerno4):
     """diffrax's Kvaerno4 with a Jacobian at every implicit stage's predictor."""
 
     calculate_jacobian: ClassVar = EVERY_STAGE
 
 
-class Kvaerno5(dfx.Kvaerno5):
+class Kvaerno5(_StepKvaerno5):
     """diffrax's Kvaerno5 with a Jacobian at every implicit stage's predictor."""
 
     calculate_jacobian: ClassVar = EVERY_STAGE
@@ -103,6 +125,7 @@ class ImplicitEuler(dfx.ImplicitEuler):
     number of steps was reached in the nonlinear solver"; the case that showed it:
     docs/hard_cases.md, "What the matrix found")."""
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, y_error, dense, state, result = super().step(
             terms, t0, t1, y0, args, solver_state, made_jump
@@ -114,9 +137,9 @@ class ImplicitEuler(dfx.ImplicitEuler):
 
 KVAERNO = {"kvaerno3": Kvaerno3, "kvaerno4": Kvaerno4, "kvaerno5": Kvaerno5}
 KVAERNO_STEP_JACOBIAN = {
-    "kvaerno3": dfx.Kvaerno3,
-    "kvaerno4": dfx.Kvaerno4,
-    "kvaerno5": dfx.Kvaerno5,
+    "kvaerno3": _StepKvaerno3,
+    "kvaerno4": _StepKvaerno4,
+    "kvaerno5": _StepKvaerno5,
 }
 
 

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _linalg
+from .._jit import traced_once
 from .fixed_step import OneStepODESolver
 
 
@@ -203,6 +204,7 @@ class Rodas5P(OneStepODESolver, dfx.AbstractAdaptiveSolver):
     def order(self, terms):
         return 5
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump
         h = t1 - t0

@@ -74,22 +74,23 @@ class PiecewiseLinear(eqx.Module):
         slope = (self.values[i + 1] - self.values[i]) / dt
         return i, self.values[i], slope
 
-    def _raw(self, t):
-        """Piecewise-linear value and slope (slope 0 outside the knots)."""
-        i, v0, slope = self._segment(t)
+    def _raw(self, t, segment):
+        """Piecewise-linear value and slope (slope 0 outside the knots) at t, in
+        its `segment`."""
+        i, v0, slope = segment
         tc = jnp.clip(t, self.times[0], self.times[-1])
         value = v0 + slope * (tc - self.times[i])
         inside = (t >= self.times[0]) & (t < self.times[-1])
         return value, jnp.where(inside, slope, jnp.zeros_like(slope))
 
-    def _antiderivative(self, t):
+    def _antiderivative(self, t, segment):
         """X(t) = int_{times[0]}^t x, with x constant outside the knots."""
         v = self.values
         if self.times.shape[0] == 1:
             return v[0] * (t - self.times[0])
         seg = 0.5 * (v[1:] + v[:-1]) * _expand(jnp.diff(self.times), v)
         C = jnp.concatenate([jnp.zeros_like(v[:1]), jnp.cumsum(seg, axis=0)], axis=0)
-        i, v0, slope = self._segment(t)
+        i, v0, slope = segment
         tc = jnp.clip(t, self.times[0], self.times[-1])
         s = tc - self.times[i]
         inner = C[i] + v0 * s + 0.5 * slope * s**2
@@ -97,23 +98,26 @@ class PiecewiseLinear(eqx.Module):
         after = v[-1] * jnp.maximum(t - self.times[-1], 0.0)
         return inner + before + after
 
-    def value(self, t):
+    def kinematics(self, t):
+        """Value, rate and acceleration at `t`, from one segment lookup (two with
+        smoothing: at t -/+ smoothing / 2)."""
         if self.smoothing == 0:
-            return self._raw(t)[0]
+            value, slope = self._raw(t, self._segment(t))
+            return value, slope, jnp.zeros_like(value)
         h = 0.5 * self.smoothing
-        return (self._antiderivative(t + h) - self._antiderivative(t - h)) / (2 * h)
+        lo, hi = self._segment(t - h), self._segment(t + h)
+        (x_lo, v_lo), (x_hi, v_hi) = self._raw(t - h, lo), self._raw(t + h, hi)
+        X_lo, X_hi = self._antiderivative(t - h, lo), self._antiderivative(t + h, hi)
+        return (X_hi - X_lo) / (2 * h), (x_hi - x_lo) / (2 * h), (v_hi - v_lo) / (2 * h)
+
+    def value(self, t):
+        return self.kinematics(t)[0]
 
     def rate(self, t):
-        if self.smoothing == 0:
-            return self._raw(t)[1]
-        h = 0.5 * self.smoothing
-        return (self._raw(t + h)[0] - self._raw(t - h)[0]) / (2 * h)
+        return self.kinematics(t)[1]
 
     def accel(self, t):
-        if self.smoothing == 0:
-            return jnp.zeros_like(self.values[0])
-        h = 0.5 * self.smoothing
-        return (self._raw(t + h)[1] - self._raw(t - h)[1]) / (2 * h)
+        return self.kinematics(t)[2]
 
 
 def _expand(x, like):
@@ -179,7 +183,7 @@ class PrescribedEnd(AbstractEnd):
         self.path = PiecewiseLinear(times, positions, smoothing)
 
     def kinematics(self, t):
-        return EndKinematics(self.path.value(t), self.path.rate(t), self.path.accel(t))
+        return EndKinematics(*self.path.kinematics(t))
 
 
 class CoupledEnd(AbstractEnd):

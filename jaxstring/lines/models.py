@@ -767,8 +767,9 @@ class LineNetwork(AbstractModel):
                 vals.append(self.L[k])
                 rates.append(jnp.zeros_like(self.L[k]))
             else:
-                vals.append(s.value(t))
-                rates.append(s.rate(t))
+                value, rate, _ = s.kinematics(t)
+                vals.append(value)
+                rates.append(rate)
         return jnp.stack(vals), jnp.stack(rates)
 
     def held_kinematics(self, t):

@@ -258,8 +258,8 @@ class AbstractTether(AbstractModel):
         if self.released is None:
             zero = jnp.zeros((), jnp.float64)
             return zero, zero, zero, self.L + zero
-        L_r = self.released.value(t)
-        return self.L - L_r, -self.released.rate(t), -self.released.accel(t), L_r
+        L_r, rate, accel = self.released.kinematics(t)
+        return self.L - L_r, -rate, -accel, L_r
 
     def _targets(self, t):
         """Targets g_j, their rates, the root link index r and the coiled-index q."""
