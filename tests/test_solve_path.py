@@ -27,3 +27,28 @@ def test_simulate_fit_and_sweep_give_the_same_trajectory():
     assert abs(value - float(np.sum(np.asarray(weights) * end))) < 1e-12 * max(
         1.0, abs(value)
     )
+
+
+def test_a_solve_traces_the_vector_field_once(monkeypatch):
+    # diffrax traces its step loop's body up to three times per solve, and a step
+    # evaluates the vector field in many places (stages, Jacobians, error
+    # estimate): the scene's vector field is traced once per structure, then reused
+    # by every solver. (k = 13: a structure no other test of the suite solves.)
+    from jaxstring import _scene
+
+    calls = []
+    vector_field = _scene.Scene.vector_field
+
+    def counting(self, t, y):
+        calls.append(t)
+        return vector_field(self, t, y)
+
+    monkeypatch.setattr(_scene.Scene, "vector_field", counting)
+    scene = js.pendulum.string_pendulum(k=13, t1=0.01)
+    first = js.simulate(scene, "bdf", n_save=2)
+    assert first.ok and len(calls) == 1
+    second = js.simulate(scene, "implicit_euler", n_save=2)
+    assert second.ok and len(calls) == 1
+    np.testing.assert_allclose(
+        np.asarray(second.ys[-1]), np.asarray(first.ys[-1]), rtol=0, atol=1e-4
+    )
