@@ -82,7 +82,8 @@ class AbstractString(AbstractModel):
         return y
 
     def state_shape(self):
-        return jnp.shape(self.initial_state(0.0))
+        # the shape alone: nothing is computed (or compiled)
+        return jax.eval_shape(self.initial_state, 0.0).shape
 
     @property
     def preset_system(self) -> str:

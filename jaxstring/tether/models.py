@@ -53,6 +53,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import dot as _dot, param as _param
+from .._jit import eager_jit
 from .._model import AbstractModel
 from .._validate import (
     check_int,
@@ -707,9 +708,19 @@ TETHER_METHODS = {
 # Initial shapes (construction time, NumPy; not traced)
 
 
-def _concrete_targets(model, t0):
-    g = np.asarray(model._targets(jnp.asarray(t0, jnp.float64))[0])
-    return g[: model.n_links]
+@eager_jit
+def _mounts(model, t0):
+    """Target link lengths and the mount positions at `t0`, in one compiled call."""
+    root = model.root.kinematics(t0).position
+    fast = model.fast.kinematics(t0).position if model.fast.attached else root
+    return model._targets(t0)[0], root, fast
+
+
+def _rest_geometry(model, t0):
+    """(target lengths of the links, root mount position, running-end mount
+    position) at `t0`, as NumPy arrays."""
+    g, a, b = (np.asarray(x) for x in _mounts(model, jnp.asarray(t0, jnp.float64)))
+    return g[: model.n_links], a, b
 
 
 def arc_state(model: AbstractTether, bulge=(-1.0, 0.0, 0.0), t0: float = 0.0):
@@ -726,10 +737,7 @@ def arc_state(model: AbstractTether, bulge=(-1.0, 0.0, 0.0), t0: float = 0.0):
         raise ValueError(
             "`arc_state` needs an attached running end; use hanging_state."
         )
-    g = _concrete_targets(model, t0)
-    t0a = jnp.asarray(t0, jnp.float64)
-    a = np.asarray(model.root.kinematics(t0a).position)
-    b = np.asarray(model.fast.kinematics(t0a).position)
+    g, a, b = _rest_geometry(model, t0)
     D = float(np.linalg.norm(b - a))
     Ltot = float(g.sum())
     if not D < Ltot * (1 - 1e-9):
@@ -783,8 +791,7 @@ def hanging_state(model: AbstractTether, direction=(0.0, 0.0, -1.0), t0: float =
     """
     if model.fast.attached:
         raise ValueError("`hanging_state` needs a FreeEnd running end.")
-    g = _concrete_targets(model, t0)
-    a = np.asarray(model.root.kinematics(jnp.asarray(t0, jnp.float64)).position)
+    g, a, _ = _rest_geometry(model, t0)
     e = np.asarray(direction, float)
     e = e / np.linalg.norm(e)
     s = np.cumsum(g)[: model.N]
