@@ -7,7 +7,8 @@
 * OpenBLAS threads are limited inside jaxstring's own calls only
   (`jaxstring._blas`); XLA:CPU's YNNPACK fusions are turned off per compilation
   for the solves (``jaxstring._jit``).
-* At jaxstring's first solve (not on import), JAX's persistent compilation cache
+* At jaxstring's first compiled call (not on import: the first solve, or a
+  scene's build), JAX's persistent compilation cache
   is turned on in a per-user folder unless the user configured it or set
   ``JAXSTRING_CACHE=off`` (`enable_compilation_cache`), so that a second process
   solving a scene of the same structure skips tracing and compiling it.
@@ -65,11 +66,11 @@ def enable_compilation_cache(
     `path`/programs), so that process skips tracing as well (see
     `jaxstring._programs`). Returns the folder.
 
-    jaxstring does this itself at its first solve, unless JAX's cache was already
-    configured (then it is left as it is) or ``JAXSTRING_CACHE=off`` is set; call
-    it to choose another folder. `disable_compilation_cache` turns it off. JAX's
-    cache is process-wide: from then on it also keeps the user's own programs that
-    take `min_compile_s` or more to compile.
+    jaxstring does this itself at its first compiled call, unless JAX's cache was
+    already configured (then it is left as it is) or ``JAXSTRING_CACHE=off`` is
+    set; call it to choose another folder. `disable_compilation_cache` turns it
+    off. JAX's cache is process-wide: from then on it also keeps the user's own
+    programs that take `min_compile_s` or more to compile.
     """
     path = path or default_cache_dir()
     if not (isinstance(min_compile_s, (int, float)) and min_compile_s >= 0):
@@ -104,7 +105,7 @@ def cache_off_by_environment() -> bool:
 
 
 def ensure_compilation_cache():
-    """At jaxstring's first solve: the persistent compilation cache on in
+    """At jaxstring's first compiled call: the persistent compilation cache on in
     `default_cache_dir()`, unless ``JAXSTRING_CACHE=off``, the user configured
     JAX's cache, or `disable_compilation_cache` was called."""
     if _CACHE["state"] is not None:

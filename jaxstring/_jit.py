@@ -20,6 +20,8 @@ import equinox as eqx
 import jax
 import jax.tree_util as jtu
 
+from ._config import ensure_compilation_cache
+
 
 CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
@@ -70,6 +72,7 @@ def cpu_jit(fun):
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
+        ensure_compilation_cache()
         dynamic, static = split(args, kwargs)
         leaves = [x for x in jtu.tree_leaves(dynamic) if isinstance(x, jax.Array)]
         # Inside another trace (a caller's jit, vmap or grad) the outer compilation

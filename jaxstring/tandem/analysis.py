@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .. import _programs
 from .._blas import single_blas_thread
 from .._scene import Scene
 from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
@@ -247,8 +248,7 @@ def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
     return ys, ok & (res < 1e-6), T, clr, J
 
 
-@eqx.filter_jit
-def _equilibria_map(scenes, n_grid, rtol, atol, max_steps, method):
+def _equilibria_map_body(scenes, n_grid, rtol, atol, max_steps, method):
     """`_equilibria_batch` from the `grid_starts` of each of a batch of scenes,
     vmapped inside one compiled call (a vmap of a compiled function would trace its
     body twice: once, then batched)."""
@@ -258,6 +258,9 @@ def _equilibria_map(scenes, n_grid, rtol, atol, max_steps, method):
         return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
 
     return eqx.filter_vmap(one)(scenes)
+
+
+_equilibria_map = eqx.filter_jit(_equilibria_map_body)
 
 
 def _collect(ys, ok, T, clr, J, taut_tension):
@@ -335,7 +338,14 @@ def find_equilibria_map(scenes, **options):
 def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     _check_method(method)
     batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
-    out = _equilibria_map(batch, n_grid, rtol, atol, max_steps, method)
+    args = (batch, n_grid, rtol, atol, max_steps, method)
+    # through a saved program where one can be saved (a later process skips
+    # tracing the solves: `jaxstring._programs`)
+    out = (
+        _programs.call(_equilibria_map_body, *args) if _programs.usable(args) else None
+    )
+    if out is None:
+        out = _equilibria_map(*args)
     return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
 
 

@@ -238,9 +238,10 @@ def test_S1_counts_and_stability(cell):
     assert got[2] == want[2]
 
 
-def test_S1_weathervane_example_and_mirror_symmetry():
+def test_S1_weathervane_example_and_mirror_symmetry(tmp_path):
     # V_w = 15 m/s, Delta_w = 90 deg: one stable weathervaned equilibrium with
-    # psi1 = 41 deg, psi2 = 29 deg, T = 216 kN [P]; -Delta_w gives the mirror image.
+    # psi1 = 41 deg, psi2 = 29 deg, T = 216 kN [P]; -Delta_w gives the mirror image
+    # (solved through a saved program, as a process with the cache on does).
     eqs = equilibria(15.0, 90.0)
     stable = [e for e in eqs if e.stable and e.admissible]
     assert len(stable) == 1
@@ -249,7 +250,14 @@ def test_S1_weathervane_example_and_mirror_symmetry():
     assert abs(e.tension - 216e3) < 2e3
     others = [e for e in eqs if not e.stable]
     assert all(o.kind in ("saddle", "oscillatory unstable") for o in others)
-    mirror = equilibria(15.0, -90.0)
+    from jaxstring import _programs
+
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        mirror = find_equilibria(tandem_equilibria(V_w=15.0, Delta_w_deg=-90.0))
+    finally:
+        _programs.set_program_folder(None)
+    assert list(tmp_path.glob("*.program"))
     assert len(mirror) == len(eqs)
     for e in eqs:
         y = e.y.reshape(2, 6)
