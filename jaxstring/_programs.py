@@ -1,9 +1,9 @@
 """Saved solve programs: a later process skips tracing as well as compiling.
 
 JAX's persistent compilation cache (`enable_compilation_cache`) saves the XLA
-compilation of a solve, but every new process still traces the solve in Python
-(diffrax traces a solver step three times), which costs more than the run itself
-for a small scene (measured: docs/performance.md, "Compile time").
+compilation of a solve, but every new process still traces the solve in Python,
+which costs more than the run itself for a small scene (measured:
+docs/performance.md, "Compile time").
 With a program folder set, `simulate` exports the traced solve once
 (`jax.export`) and later processes load it and run it without tracing; the
 program's compilation comes from the compilation cache as before.

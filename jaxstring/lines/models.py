@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .. import _programs
 from .._arrays import dot as _dot, param as _param
 from .._blas import single_blas_thread
 from .._environment import Environment
@@ -1645,8 +1646,7 @@ def _newton_step(x, J, model, effects, env, t0, solve_rows):
     return x + (dx - jax.lax.stop_gradient(dx))
 
 
-@eqx.filter_jit
-def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
+def _solve_equilibrium_body(x0, model, effects, env, t0, solve_rows, max_iter, tol):
     frozen = jax.lax.stop_gradient((model, effects, env))
     # Forces below 1e-9 of the total weight in water count as balanced.
     m, _, v = frozen
@@ -1661,6 +1661,9 @@ def _solve_equilibrium(x0, model, effects, env, t0, solve_rows, max_iter, tol):
     x = jax.lax.stop_gradient(x)
     x = _newton_step(x, J, model, effects, env, t0, solve_rows)
     return x, res, it, ftol
+
+
+_solve_equilibrium = eqx.filter_jit(_solve_equilibrium_body)
 
 
 @single_blas_thread
@@ -1707,9 +1710,13 @@ def equilibrium(
         y0 = initial_shape(model, effects, env, t0)
     x0 = jax.lax.stop_gradient(y0[:, :3])
     t0 = jnp.asarray(t0, jnp.float64)
-    x, res, it, ftol = _solve_equilibrium(
-        x0, model, effects, env, t0, solve_rows, max_iter, tol
-    )
+    args = (x0, model, effects, env, t0, solve_rows, max_iter, tol)
+    # through a saved program where one can be saved (a later process skips
+    # tracing the solve: `jaxstring._programs`); differentiated, the jitted solve
+    out = None
+    if _programs.usable(args):
+        out = _programs.call(_solve_equilibrium_body, *args)
+    x, res, it, ftol = _solve_equilibrium(*args) if out is None else out
     if not isinstance(res, jax.core.Tracer):
         if not bool(jnp.isfinite(res)) or float(res) > 1e3 * ftol:
             raise ValueError(

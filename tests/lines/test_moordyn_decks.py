@@ -34,8 +34,19 @@ G = 9.80665  # MoorDyn's gravity, the decks' default
 
 
 @pytest.fixture(scope="module")
-def wd0050():
-    return lines.read_moordyn(lines.case_path("WD0050_Chain.txt"))
+def wd0050(tmp_path_factory):
+    # its static state solved through a saved program, as a process with the
+    # compilation cache on (the default) does
+    from jaxstring import _programs
+
+    folder = tmp_path_factory.mktemp("programs")
+    _programs.set_program_folder(str(folder))
+    try:
+        scene = lines.read_moordyn(lines.case_path("WD0050_Chain.txt"))
+    finally:
+        _programs.set_program_folder(None)
+    assert list(folder.glob("*.program"))
+    return scene
 
 
 # ---------------------------------------------------------------------------
