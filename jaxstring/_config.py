@@ -51,6 +51,19 @@ def default_cache_dir() -> str:
 
 
 _CACHE = {"state": None}  # None: not yet decided; else the folder or "off"
+_PROGRAMS = {"path": None}  # where traced solves are saved (`jaxstring._programs`)
+
+
+def set_program_folder(path: str | None) -> None:
+    """Save and load traced solve programs in `path` (None: off)."""
+    if path is not None:
+        os.makedirs(path, exist_ok=True)
+    _PROGRAMS["path"] = path
+
+
+def program_folder() -> str | None:
+    """The folder of saved solve programs (None: off)."""
+    return _PROGRAMS["path"]
 
 
 def enable_compilation_cache(
@@ -81,9 +94,7 @@ def enable_compilation_cache(
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_s)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    from . import _programs
-
-    _programs.set_program_folder(os.path.join(path, "programs") if programs else None)
+    set_program_folder(os.path.join(path, "programs") if programs else None)
     _CACHE["state"] = path
     return path
 
@@ -91,9 +102,7 @@ def enable_compilation_cache(
 def disable_compilation_cache():
     """Stop jaxstring from saving and loading compiled and traced solves (JAX's
     compilation cache stays as the user configured it)."""
-    from . import _programs
-
-    _programs.set_program_folder(None)
+    set_program_folder(None)
     if _CACHE["state"] not in (None, "off"):
         jax.config.update("jax_compilation_cache_dir", None)
     _CACHE["state"] = "off"

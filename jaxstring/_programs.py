@@ -35,17 +35,8 @@ import equinox as eqx
 import jax
 import jax.tree_util as jtu
 
+from ._config import program_folder, set_program_folder as set_program_folder
 from ._jit import CPU_COMPILER_OPTIONS, compile_notice
-
-
-_FOLDER = {"path": None}
-
-
-def set_program_folder(path: str | None) -> None:
-    """Save and load solve programs in `path` (None: off)."""
-    if path is not None:
-        os.makedirs(path, exist_ok=True)
-    _FOLDER["path"] = path
 
 
 @functools.cache
@@ -102,7 +93,7 @@ def _key(static, treedef, leaves) -> str | None:
 def usable(args) -> bool:
     """Whether `args` may go through a saved program: a program folder is set and
     every array is a concrete CPU array."""
-    if _FOLDER["path"] is None:
+    if program_folder() is None:
         return False
     for x in jtu.tree_leaves(args):
         if isinstance(x, jax.core.Tracer):
@@ -137,7 +128,7 @@ def call(fn, *args):
 
 
 def _load_or_export(fn, key, static, treedef, leaves):
-    path = pathlib.Path(_FOLDER["path"]) / f"{key}.program"
+    path = pathlib.Path(program_folder()) / f"{key}.program"
     if path.exists():
         try:
             return pickle.loads(path.read_bytes())
