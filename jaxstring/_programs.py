@@ -9,7 +9,9 @@ With a program folder set, `simulate` exports the traced solve once
 program's compilation comes from the compilation cache as before.
 
 A saved program is keyed by everything that decides the traced program: the
-repr of the scene's and the solver settings' non-array parts, the structure,
+function's module and name (a function whose result depends on its arguments
+alone, as jaxstring's are; a lambda is not saved), the repr of the arguments'
+(scene's, solver settings') non-array parts, the structure,
 shapes and dtypes of their arrays, the versions of jax, jaxlib, diffrax and
 equinox, and a digest of jaxstring's own source. A scene whose non-array parts
 have no stable repr (a Python function among them) is not saved, nor a solve
@@ -68,12 +70,16 @@ def _types(x, out=None) -> str:
     return ",".join(out)
 
 
-def _key(static, treedef, leaves) -> str | None:
+def _key(fn, static, treedef, leaves) -> str | None:
+    name = f"{fn.__module__}.{fn.__qualname__}"
+    if "<lambda>" in name:  # nameless: two lambdas would share one program
+        return None
     text = repr(static)
     if " at 0x" in text:  # an object without a stable repr (a function)
         return None
     h = hashlib.sha256()
     for part in (
+        name,
         text,
         _types(static),
         str(treedef),
@@ -114,7 +120,7 @@ def call(fn, *args):
     usual way."""
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jtu.tree_flatten(dynamic)
-    key = _key(static, treedef, leaves)
+    key = _key(fn, static, treedef, leaves)
     if key is None or key in _REFUSED:
         return None
     with compile_notice(fn.__name__.lstrip("_").removesuffix("_fields")):

@@ -99,6 +99,9 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
         traces.append(1)
         return {"y": jnp.cumsum(jnp.sin(x) * scale), "n": jnp.sum(x > 0)}
 
+    def with_callback(v):
+        return {"y": jax.pure_callback(lambda a: a, v, v)}
+
     x = jnp.linspace(-1.0, 2.0, 7)
     _programs.set_program_folder(str(tmp_path))
     try:
@@ -107,7 +110,8 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
         _programs._LOADED.clear()  # as in a new process: read the saved file
         second = _programs.call(fn, x, jnp.asarray(2.0))
         other = _programs.call(fn, x, jnp.asarray(3.0))  # new values, same program
-        bad = _programs.call(lambda v: {"y": jax.pure_callback(lambda a: a, v, v)}, x)
+        bad = _programs.call(with_callback, x)
+        unnamed = _programs.call(lambda v: {"y": 2.0 * v}, x)
     finally:
         _programs.set_program_folder(None)
     assert len(traces) == 1
@@ -119,6 +123,7 @@ def test_saved_program_runs_without_tracing_and_gives_the_same_result(tmp_path):
     assert jnp.allclose(other["y"], 1.5 * expected, rtol=1e-15, atol=1e-15)
     assert int(second["n"]) == 4  # 0.5, 1, 1.5, 2
     assert bad is None  # host callbacks: no program, the caller runs it its own way
+    assert unnamed is None  # a lambda has no name to key its program by
 
 
 def test_saved_programs_of_two_solver_classes_of_one_name_are_two(tmp_path):
@@ -201,3 +206,24 @@ def test_sweep_bad_vary_exits_2(tmp_path, capsys, vary, part):
             "--out", str(tmp_path)]  # fmt: skip
     assert main(argv) == 2
     assert part in capsys.readouterr().err
+
+
+def test_saved_programs_of_two_functions_with_the_same_arguments_are_two(tmp_path):
+    # The key holds the function's name: two functions of the same arguments
+    # (the equilibria's and the solve's, say) do not run each other's program.
+    from jaxstring import _programs
+
+    def double(x):
+        return {"y": 2.0 * x}
+
+    def triple(x):
+        return {"y": 3.0 * x}
+
+    x = jnp.arange(4.0)
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        two, three = _programs.call(double, x), _programs.call(triple, x)
+    finally:
+        _programs.set_program_folder(None)
+    assert len(list(tmp_path.glob("*.program"))) == 2
+    assert jnp.array_equal(two["y"], 2.0 * x) and jnp.array_equal(three["y"], 3.0 * x)
