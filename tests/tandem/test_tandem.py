@@ -238,10 +238,9 @@ def test_S1_counts_and_stability(cell):
     assert got[2] == want[2]
 
 
-def test_S1_weathervane_example_and_mirror_symmetry(tmp_path):
+def test_S1_weathervane_example_and_mirror_symmetry():
     # V_w = 15 m/s, Delta_w = 90 deg: one stable weathervaned equilibrium with
-    # psi1 = 41 deg, psi2 = 29 deg, T = 216 kN [P]; -Delta_w gives the mirror image
-    # (solved through a saved program, as a process with the cache on does).
+    # psi1 = 41 deg, psi2 = 29 deg, T = 216 kN [P]; -Delta_w gives the mirror image.
     eqs = equilibria(15.0, 90.0)
     stable = [e for e in eqs if e.stable and e.admissible]
     assert len(stable) == 1
@@ -250,14 +249,7 @@ def test_S1_weathervane_example_and_mirror_symmetry(tmp_path):
     assert abs(e.tension - 216e3) < 2e3
     others = [e for e in eqs if not e.stable]
     assert all(o.kind in ("saddle", "oscillatory unstable") for o in others)
-    from jaxstring import _programs
-
-    _programs.set_program_folder(str(tmp_path))
-    try:
-        mirror = find_equilibria(tandem_equilibria(V_w=15.0, Delta_w_deg=-90.0))
-    finally:
-        _programs.set_program_folder(None)
-    assert list(tmp_path.glob("*.program"))
+    mirror = equilibria(15.0, -90.0)
     assert len(mirror) == len(eqs)
     for e in eqs:
         y = e.y.reshape(2, 6)
@@ -311,6 +303,25 @@ def test_S1_opposing_wind_mirror_pairs_and_jackknife(V_w):
     for e in st:
         p1, p2 = e.headings_deg
         assert 88 < abs(p1) < 106 and 21 < abs(p2) < 52 and p1 * p2 < 0
+
+
+# Its own compilation of the exported program (about 15 s): slow.
+@pytest.mark.slow
+def test_equilibria_through_a_saved_program_are_the_same(tmp_path):
+    # As a process with the cache on finds them: through a saved program.
+    from jaxstring import _programs
+
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        saved = find_equilibria(tandem_equilibria(V_w=15.0, Delta_w_deg=90.0))
+    finally:
+        _programs.set_program_folder(None)
+    assert list(tmp_path.glob("*.program"))
+    direct = equilibria(15.0, 90.0)
+    assert [e.kind for e in saved] == [e.kind for e in direct]
+    for a, b in zip(saved, direct):
+        np.testing.assert_allclose(a.y, b.y, rtol=1e-9, atol=1e-9)
+        assert abs(a.tension - b.tension) <= 1e-9 * abs(b.tension)
 
 
 def test_S1_find_equilibria_method():
