@@ -133,6 +133,14 @@ def call(fn, *args):
         return _LOADED[key](*leaves)
 
 
+def call_or_jit(fn, jitted, *args):
+    """`fn(*args)` through a saved program where one can be saved (concrete CPU
+    arrays, a program folder set), else `jitted(*args)` (`fn` compiled: traced
+    arguments, to differentiate, or no program folder)."""
+    out = call(fn, *args) if usable(args) else None
+    return jitted(*args) if out is None else out
+
+
 def _load_or_export(fn, key, static, treedef, leaves):
     path = pathlib.Path(program_folder()) / f"{key}.program"
     if path.exists():

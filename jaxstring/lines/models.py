@@ -1710,13 +1710,12 @@ def equilibrium(
         y0 = initial_shape(model, effects, env, t0)
     x0 = jax.lax.stop_gradient(y0[:, :3])
     t0 = jnp.asarray(t0, jnp.float64)
-    args = (x0, model, effects, env, t0, solve_rows, max_iter, tol)
-    # through a saved program where one can be saved (a later process skips
-    # tracing the solve: `jaxstring._programs`); differentiated, the jitted solve
-    out = None
-    if _programs.usable(args):
-        out = _programs.call(_solve_equilibrium_body, *args)
-    x, res, it, ftol = _solve_equilibrium(*args) if out is None else out
+    # a later process skips tracing the solve (`jaxstring._programs`)
+    x, res, it, ftol = _programs.call_or_jit(
+        _solve_equilibrium_body,
+        _solve_equilibrium,
+        *(x0, model, effects, env, t0, solve_rows, max_iter, tol),
+    )
     if not isinstance(res, jax.core.Tracer):
         if not bool(jnp.isfinite(res)) or float(res) > 1e3 * ftol:
             raise ValueError(

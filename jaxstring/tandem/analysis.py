@@ -338,14 +338,12 @@ def find_equilibria_map(scenes, **options):
 def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     _check_method(method)
     batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
-    args = (batch, n_grid, rtol, atol, max_steps, method)
-    # through a saved program where one can be saved (a later process skips
-    # tracing the solves: `jaxstring._programs`)
-    out = (
-        _programs.call(_equilibria_map_body, *args) if _programs.usable(args) else None
+    # a later process skips tracing the solves (`jaxstring._programs`)
+    out = _programs.call_or_jit(
+        _equilibria_map_body,
+        _equilibria_map,
+        *(batch, n_grid, rtol, atol, max_steps, method),
     )
-    if out is None:
-        out = _equilibria_map(*args)
     return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
 
 
