@@ -98,7 +98,7 @@ def export_chunk(fn, args):
     if cache_key is not None and cache_key in _EXPORTED:
         return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
     jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
-    exported = jax.export.export(jitted)(*avals)
+    exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
     # The private `_get_vjp` (a closure, not picklable) serves differentiation of
     # the loaded program only, which a sweep does not do.
     data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))

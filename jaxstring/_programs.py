@@ -155,7 +155,7 @@ def _load_or_export(fn, key, static, treedef, leaves):
     avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
     try:
         jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
-        exported = jax.export.export(jitted)(*avals)
+        exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
     except (NotImplementedError, ValueError):  # host callbacks cannot be exported
         return None
     try:

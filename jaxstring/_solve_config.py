@@ -240,7 +240,10 @@ class SolveConfig(eqx.Module):
             if jax.default_backend() == "cpu":
                 return tree
             device = jax.devices("cpu")[0]
-        return jax.device_put(tree, device)
+        # Only the arrays move: a solve's arguments also hold functions (a
+        # residual, a summary) and other static leaves.
+        dynamic, static = eqx.partition(tree, eqx.is_array)
+        return eqx.combine(jax.device_put(dynamic, device), static)
 
     def check_scene(self, scene) -> None:
         """Refuse settings that do not fit `scene` (save times outside its span; an

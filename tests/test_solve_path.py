@@ -1,8 +1,16 @@
 """One solve path: simulate, fit (its loss and gradient) and sweep integrate a scene
-through the same `solve`, so they give the same trajectory."""
+through the same `solve`, so they give the same trajectory; a solve placed on a
+named device runs there with the same result."""
 
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxstring as js
 
@@ -52,3 +60,55 @@ def test_a_solve_traces_the_vector_field_once(monkeypatch):
     np.testing.assert_allclose(
         np.asarray(second.ys[-1]), np.asarray(first.ys[-1]), rtol=0, atol=1e-4
     )
+
+
+def test_a_named_device_moves_the_arrays_and_keeps_the_functions():
+    # A solve's arguments hold functions (a residual) beside arrays: placing them
+    # on a named device moves the arrays and leaves the rest as it was.
+    cpu = jax.devices("cpu")[0]
+
+    def residual(traj, scene):
+        return traj.end_mass
+
+    tree = (jnp.arange(3.0), residual, {"n": 4, "x": np.ones(2)})
+    placed = js.SolveConfig(device=cpu).placed(tree)
+    assert placed[1] is residual and placed[2]["n"] == 4
+    assert placed[0].devices() == {cpu} and placed[0].committed
+    assert np.array_equal(placed[0], tree[0])
+    assert np.array_equal(placed[2]["x"], tree[2]["x"])
+    assert js.SolveConfig().placed(tree) is tree  # "auto" on a CPU host
+
+
+@pytest.mark.slow
+def test_solves_on_a_named_second_device_equal_those_on_the_first():
+    # A fresh process with two CPU devices: simulate and least_squares with
+    # `device=` the second run there and give the first device's results.
+    code = textwrap.dedent(
+        """
+        import numpy as np, jax, jax.numpy as jnp
+        import jaxstring as js
+        second = jax.devices()[1]
+        scene = js.string_pendulum(k=3, EA=1e3, alpha=0.02, t1=0.2)
+        ts = jnp.linspace(0.0, 0.2, 11)
+        one = js.simulate(scene, ts=ts)
+        two = js.simulate(scene, ts=ts, device=second)
+        assert two.end_mass.devices() == {second}, two.end_mass.devices()
+        data = one.end_mass
+        start = js.string_pendulum(k=3, EA=1e3, alpha=0.03, t1=0.2)
+        res = lambda t, s: t.end_mass - data
+        fits = [js.least_squares(start, res, ["alpha"], ts=ts, device=d)
+                for d in ("auto", second)]
+        print(float(np.max(np.abs(one.end_mass - two.end_mass))),
+              abs(fits[0].values["alpha"] - fits[1].values["alpha"]),
+              fits[1].values["alpha"])
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True,
+        timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    ends, fits, alpha = map(float, out.stdout.split())
+    assert ends < 1e-12 and fits < 1e-12
+    assert abs(alpha - 0.02) < 1e-6  # the fit finds the damping of the data
