@@ -620,7 +620,35 @@ STUDIES = (
             "jaxstring/_worker.py",
             "jaxstring/testing/peers.py",
         ),
-        (Run((), _files("sweep_scale", ext=("md", "csv", "png"))),),
+        (
+            Run((), _files("sweep_scale", ext=("md", "csv", "png"))),
+            # On a GPU machine: its GPU, then its CPU cores alone.
+            Run(
+                tuple(
+                    "--members 1024,8192,65536 --peer-members 1024 "
+                    "--one-call-from 65536 --name sweep_scale_gpu".split()
+                ),
+                _files("sweep_scale_gpu", ext=("md", "csv", "png")),
+                gpu=True,
+            ),
+            Run(
+                tuple(
+                    "--cpu --members 1024 --workers 16 "
+                    "--name sweep_scale_16core".split()
+                ),
+                _files("sweep_scale_16core"),
+                gpu=True,
+            ),
+        ),
+    ),
+    Study(
+        "placement",
+        "placement.py",
+        "where one simulate or least_squares runs on a host with a GPU",
+        "GPU run: 2.5 min",
+        (*PENDULUM, *FIT, "jaxstring/_solve_config.py", "jaxstring/_programs.py"),
+        (Run(("--repeats", "1"), _files("placement"), gpu=True),),
+        quick=(),
     ),
     Study(
         "compile_options",
