@@ -271,15 +271,16 @@ class _Remote(eqx.Module):
         return _remote_residuals(self.token, jnp.stack(theta), self.m)
 
 
-def _workers(processes, executor, scenes) -> int:
+def _workers(processes, executor, scenes, config) -> int:
     """Worker processes of this host for the experiments `scenes`: `processes`, or
     with "auto" one per experiment up to the host's cores where there are several
-    experiments (and the default backend is the CPU); 0 for a user's executor."""
+    experiments and `config` solves on a CPU (also on a GPU host, by default); 0
+    for a user's executor."""
     if executor is not None:
         return 0
     if processes != "auto":
         return int(processes)
-    if jax.default_backend() != "cpu" or len(scenes) < 2:
+    if not config.on_cpu() or len(scenes) < 2:
         return 1
     return min(_distribute.host_cores(), len(scenes))
 
@@ -389,9 +390,10 @@ def least_squares(
     - `max_iters`, `tol`: Levenberg-Marquardt's iteration limit and its relative
       and absolute tolerance on the parameters (in log p where positive).
     - `verbose`: print the result.
-    - `processes`: `"auto"` (default: with two or more experiments on a CPU host,
-      one worker process per experiment up to the host's cores; else this process
-      alone), or the number of worker processes. With workers, each
+    - `processes`: `"auto"` (default: with two or more experiments solved on a CPU,
+      as they are under `device="auto"` also on a GPU host, one worker process per
+      experiment up to the host's cores; else this process alone), or the number
+      of worker processes. With workers, each
       Levenberg-Marquardt iteration sends the current parameters to them; each
       experiment's residuals and their Jacobian come from one program per
       experiment structure, traced once in this process and run in jaxstring's
@@ -457,7 +459,7 @@ def least_squares(
     check_jacobian_adjoint(config)
     ts = config.save_times(scenes[0].t0, scenes[0].t1)
     config = config.replace(ts=None)
-    workers = _workers(processes, executor, scenes)
+    workers = _workers(processes, executor, scenes, config)
     theta0 = [
         jnp.asarray(math.log(v) if pos else v, jnp.float64)
         for v, pos in zip(starts, positive)

@@ -230,6 +230,15 @@ class SolveConfig(eqx.Module):
         checkpoints = self.checkpoints if isinstance(self.checkpoints, int) else None
         return make_adjoint(self.adjoint, checkpoints)
 
+    def on_cpu(self) -> bool:
+        """Whether a single solve of this configuration runs on a CPU (`device`
+        "auto" always does)."""
+        if self.device == "auto":
+            return True
+        if self.device == "default":
+            return jax.default_backend() == "cpu"
+        return self.device.platform == "cpu"
+
     def placed(self, tree):
         """`tree` (a solve's arguments) on the configuration's device: the host CPU
         under "auto", as it is under "default"."""

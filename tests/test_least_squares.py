@@ -5,6 +5,7 @@ differences, fits several experiments at once, and refuses bad input up front.""
 import functools
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -283,6 +284,23 @@ def test_bad_worker_settings_are_refused_by_name(kw, parts):
         js.least_squares(_scene(), js.Misfit(_data()), ["alpha"], ts=TS, **kw)
     for part in parts:
         assert part in str(info.value)
+
+
+def test_experiments_go_to_the_cores_wherever_their_solves_run_on_a_cpu(monkeypatch):
+    # On a GPU host a single solve runs on the host CPU ("auto"), so several
+    # experiments go to worker processes on its cores, as on a CPU host; placed on
+    # the GPU they stay in this process.
+    from jaxstring._least_squares import _workers
+
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    three = [_scene()] * 3
+    auto = js.SolveConfig()
+    assert _workers("auto", None, three, auto) == min(host_cores(), 3)
+    assert _workers("auto", None, three[:1], auto) == 1
+    assert _workers("auto", None, three, auto.replace(device="default")) == 1
+    assert not auto.replace(device="default").on_cpu()
+    assert _workers(2, None, three, auto) == 2
+    assert _workers("auto", object(), three, auto) == 0
 
 
 def _kill_experiment():
