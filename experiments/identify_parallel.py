@@ -22,8 +22,14 @@ called once to compile (with the workers' start for processes=2), then `REPEATS`
 times on fresh noise (the compiled programs reused): `compile_s` is the first
 call minus the median run.
 
-Run: ``python experiments/identify_parallel.py [--quick]`` (quick: k = 4, 0.5 s,
-two experiments, one repeat). Writes results/identify_parallel.{md,csv}.
+With ``--fit`` the same experiments are fitted by `fit` instead (L-BFGS on the
+sum of squared residuals over the noise, at most `FIT_STEPS` steps, forward-mode
+gradients): one process solves the experiments one after another inside its
+compiled step (no vmap), workers as for `least_squares`.
+
+Run: ``python experiments/identify_parallel.py [--quick] [--fit]`` (quick: k = 4,
+0.5 s, two experiments, one repeat). Writes results/identify_parallel.{md,csv}
+(``--fit``: identify_parallel_fit.{md,csv}).
 """
 
 import argparse
@@ -38,6 +44,7 @@ import _common as common
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+import optax
 
 import jaxstring as js
 
@@ -47,6 +54,7 @@ TRUTH = dict(EA=1e3, alpha=0.05)
 START = dict(EA=1.4e3, alpha=0.07)
 NOISE = 5e-4
 REPEATS = 2
+FIT_STEPS = 25
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -63,6 +71,16 @@ class _Data(eqx.Module):
         return (traj.end_mass - self.data[i]).ravel()
 
 
+class _Squared(eqx.Module):
+    """`fit`'s loss: half the sum of squared residuals over the noise (a Module, so
+    that new data reuse the compiled fit)."""
+
+    residual: _Data
+
+    def __call__(self, traj, scene):
+        return 0.5 * jnp.sum((self.residual(traj, scene) / NOISE) ** 2)
+
+
 def _scene(k, t1, angle, **values):
     p = TRUTH | values
     return js.pendulum.string_pendulum(
@@ -75,7 +93,16 @@ def _shell(cmd):
     return out.stdout.strip()
 
 
-def main(quick=False):
+class _Fitted:
+    """A `fit` result read as the table reads a `least_squares` one."""
+
+    def __init__(self, res):
+        self.values = res.values()
+        self.iterations = len(res.losses)
+        self.converged, self.message = res.converged, res.message
+
+
+def main(quick=False, use_fit=False):
     common.set_quick(quick)
     # A fresh persistent compilation cache: the first calls compile cold (the
     # configuration run after two processes finds their program there).
@@ -98,18 +125,39 @@ def main(quick=False):
         how = dict(processes=processes)
         if processes == "thread":
             how = dict(executor=one_thread)
-        res, wall, _ = common.clock(
-            lambda: js.least_squares(
-                starts,
-                _Data(jnp.asarray(noisy), ends),
-                ["alpha", "EA"],
-                ts=ts,
-                rtol=1e-6,
-                atol=1e-6,
-                tol=1e-5,
-                **how,
+        data = _Data(jnp.asarray(noisy), ends)
+        if use_fit:
+            res, wall, _ = common.clock(
+                lambda: _Fitted(
+                    js.fit(
+                        starts,
+                        _Squared(data),
+                        ["alpha", "EA"],
+                        steps=FIT_STEPS,
+                        optimizer=optax.lbfgs(),
+                        gtol=1e-3,
+                        print_every=None,
+                        ts=ts,
+                        rtol=1e-6,
+                        atol=1e-6,
+                        adjoint="forward",
+                        **how,
+                    )
+                )
             )
-        )
+        else:
+            res, wall, _ = common.clock(
+                lambda: js.least_squares(
+                    starts,
+                    data,
+                    ["alpha", "EA"],
+                    ts=ts,
+                    rtol=1e-6,
+                    atol=1e-6,
+                    tol=1e-5,
+                    **how,
+                )
+            )
         print(
             f"processes={processes} seed={seed}: {wall:.2f} s, {res.iterations} "
             f"iterations, {res.message}, {res.values}",
@@ -155,7 +203,12 @@ def main(quick=False):
         f"{len(angles)} experiments (release angles "
         f"{', '.join(f'{np.degrees(a):g}' for a in angles)} deg), string pendulum "
         f"k = {k}, {t1} s, {n_samples} samples, noise {NOISE * 1e3} mm; alpha and EA "
-        f"from a start 40 % off; Kvaerno5 at rtol = atol = 1e-6, LM tol 1e-5.",
+        f"from a start 40 % off; Kvaerno5 at rtol = atol = 1e-6, "
+        + (
+            f"fit: L-BFGS, at most {FIT_STEPS} steps, gtol 1e-3, forward mode."
+            if use_fit
+            else "LM tol 1e-5."
+        ),
         "first_call_s: the first call (tracing, compilation; for processes=2 also "
         "starting the two workers and compiling in each, from a cold persistent "
         "compilation cache; processes=thread, run last, loads the same program "
@@ -163,14 +216,24 @@ def main(quick=False):
         f"{repeats} later calls on fresh noise; compile_s = first_call_s - run_s.",
         "processes=thread: `executor=ThreadPoolExecutor(1)`, the workers' programs "
         "run one experiment at a time in this process (what two processes share "
-        "out); processes=1: the experiments in one vmap inside the compiled "
-        "iteration (the default path of one process).",
+        "out); processes=1: the experiments "
+        + (
+            "one after another inside the compiled step"
+            if use_fit
+            else "in one vmap inside the compiled iteration"
+        )
+        + " (the default path of one process).",
         f"Compiled run: processes=1 over processes=2 {speedup:.2f}x; one thread over "
         f"two processes {parallel:.2f}x.",
         f"Largest relative difference of the fitted values (seed 0): two processes "
         f"against one thread {same:.1e} (the same programs), against processes=1 "
-        f"{rel:.1e} (the vmapped solves differ from separate ones by about the "
-        "solver's tolerance).",
+        f"{rel:.1e}"
+        + (
+            "."
+            if use_fit
+            else " (the vmapped solves differ from separate ones by "
+            "about the solver's tolerance)."
+        ),
         f"Machine: `{_shell('uname -a')}`; nproc: {_shell('nproc')}.",
         f"Load (`uptime`) before: {uptime_before}; after: {_shell('uptime')}. The "
         "machine is shared with other jobs.",
@@ -180,10 +243,11 @@ def main(quick=False):
     ]
     columns = list(rows[0])
     common.write_table(
-        "identify_parallel",
+        "identify_parallel_fit" if use_fit else "identify_parallel",
         rows,
         columns,
-        "least_squares over worker processes: 4 experiments, processes=1 vs 2",
+        f"{'fit' if use_fit else 'least_squares'} over worker processes: "
+        f"{len(angles)} experiments, processes=1 vs 2",
         notes,
     )
     return rows
@@ -192,4 +256,6 @@ def main(quick=False):
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
-    main(quick=parser.parse_args().quick)
+    parser.add_argument("--fit", action="store_true", help="fit instead of LM")
+    args = parser.parse_args()
+    main(quick=args.quick, use_fit=args.fit)

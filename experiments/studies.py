@@ -598,15 +598,19 @@ STUDIES = (
     Study(
         "identify_parallel",
         "identify_parallel.py",
-        "least_squares on 4 experiments over 1 and 2 worker processes",
-        "1 min / 5 min",
+        "least_squares and fit on 4 experiments over 1 and 2 worker processes",
+        "1 min / 10 min",
         (
             *PENDULUM,
             *FIT,
             "jaxstring/_distribute.py",
             "jaxstring/_worker.py",
         ),
-        (Run((), _files("identify_parallel")),),
+        (
+            Run((), _files("identify_parallel")),
+            Run(("--fit",), _files("identify_parallel_fit")),
+        ),
+        quick=((), ("--fit",)),
     ),
     Study(
         "sweep_scale",

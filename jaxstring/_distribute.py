@@ -72,6 +72,20 @@ def check_workers(processes, executor) -> None:
             )
 
 
+def experiment_workers(processes, executor, n_experiments: int, on_cpu: bool) -> int:
+    """Worker processes of this host for `n_experiments` experiments of a fit:
+    `processes`, or with "auto" one per experiment up to the host's cores where
+    there are several and their solves run on a CPU (`on_cpu`); 0 for a user's
+    executor."""
+    if executor is not None:
+        return 0
+    if processes != "auto":
+        return int(processes)
+    if not on_cpu or n_experiments < 2:
+        return 1
+    return min(host_cores(), n_experiments)
+
+
 def _flat(fn, args):
     """`fn(*args)` as a function of the arrays of `args` alone (a list), and those
     arrays: (flat function, leaves, treedef, static parts)."""

@@ -30,6 +30,7 @@ import jax.tree_util as jtu
 import numpy as np
 import optax
 
+from . import _distribute
 from ._blas import single_blas_thread
 from ._integrate import solve
 from ._jit import cpu_jit
@@ -37,6 +38,7 @@ from ._presets import solver_for
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig, solve_config
+from ._solvers.diffrax_compat import checks_as_nan
 from ._validate import check_int, check_nonnegative, check_positive
 
 
@@ -153,6 +155,8 @@ class FitResult(eqx.Module):
     - `converged`: whether a stopping test (`gtol`) was met.
     - `message`: why the run stopped.
     - `compile_time`, `run_time`: seconds (the first step includes compilation).
+    - `processes`: worker processes of this host that evaluated the experiments
+      (1: this process; 0: a user's executor).
     """
 
     scene: Scene
@@ -164,6 +168,7 @@ class FitResult(eqx.Module):
     message: str
     compile_time: float
     run_time: float
+    processes: int = 1
 
     def values(self) -> dict:
         """Fitted values, label -> float."""
@@ -193,6 +198,19 @@ class Misfit(eqx.Module):
         return x - self.data
 
 
+def _strongly_typed(tree, device):
+    """`tree` with every array strongly typed (of its dtype) and committed to
+    `device`."""
+
+    def strong(x):
+        if jax.typeof(x).weak_type:
+            x = jax.lax.convert_element_type(x, x.dtype)
+        return jax.device_put(x, device)
+
+    dynamic, static = eqx.partition(tree, eqx.is_array)
+    return eqx.combine(jtu.tree_map(strong, dynamic), static)
+
+
 def _to_theta(diff, pos):
     return jtu.tree_map(lambda x, p: jnp.log(x) if p else x, diff, pos)
 
@@ -201,7 +219,79 @@ def _from_theta(theta, pos):
     return jtu.tree_map(lambda x, p: jnp.exp(x) if p else x, theta, pos)
 
 
+class _Experiments(eqx.Module):
+    """Several experiments fitted together in this process: each its own
+    parameter tree (in the optimised variables), positivity flags, frozen part
+    and getters; the fit's parameters are those of the first, whose values every
+    experiment takes. The loss is the sum of the experiments' losses."""
+
+    templates: tuple
+    frozens: tuple
+    poss: tuple = eqx.field(static=True)
+    getters: tuple = eqx.field(static=True)
+
+    def each(self, theta):
+        """(theta, pos, frozen) of every experiment at the fit's `theta`."""
+        values = [g(theta) for g in self.getters[0]]
+        for template, pos, frozen, getters in zip(
+            self.templates, self.poss, self.frozens, self.getters
+        ):
+            th = eqx.tree_at(lambda t: [g(t) for g in getters], template, values)
+            yield th, pos, frozen
+
+    def gather(self, theta, grads):
+        """The sum of the experiments' gradients `grads` (each in its own
+        parameter tree) as a gradient in the fit's `theta`."""
+        total = [
+            sum(g(grad) for g, grad in zip(gs, grads)) for gs in zip(*self.getters)
+        ]
+        zero = jtu.tree_map(jnp.zeros_like, theta)
+        return eqx.tree_at(lambda t: [g(t) for g in self.getters[0]], zero, total)
+
+
+class _RemoteExperiments(eqx.Module):
+    """Several experiments fitted together, each evaluated (loss and gradient) in a
+    worker process: `token` names the fit's `_FitEvaluations` in `_FIT_RUNS`."""
+
+    token: Any
+    getters: tuple = eqx.field(static=True)
+
+    def x(self, theta):
+        return jnp.stack([jnp.asarray(g(theta), jnp.float64) for g in self.getters])
+
+    def loss(self):
+        """The loss of all experiments as a function of theta, with its gradient
+        from the same evaluation in the workers."""
+
+        def evaluate(theta):
+            x = self.x(theta)
+            shapes = (
+                jax.ShapeDtypeStruct((), jnp.float64),
+                jax.ShapeDtypeStruct(x.shape, jnp.float64),
+            )
+            return jax.pure_callback(
+                _host_fit_evaluate, shapes, self.token, x, vmap_method="sequential"
+            )
+
+        def value_and_grad(theta):
+            value, g = evaluate(theta)
+            zero = jtu.tree_map(jnp.zeros_like, theta)
+            grad = eqx.tree_at(
+                lambda t: [gg(t) for gg in self.getters],
+                zero,
+                [g[i] for i in range(len(self.getters))],
+            )
+            return value, grad
+
+        return _with_gradient(lambda theta: evaluate(theta)[0], value_and_grad)
+
+
 def _objective(theta, pos, frozen, loss_fn, config, simulate, ts):
+    if isinstance(frozen, _Experiments):
+        return sum(
+            _objective(th, p, f, loss_fn, config, simulate, ts)
+            for th, p, f in frozen.each(theta)
+        )
     scene = eqx.combine(_from_theta(theta, pos), frozen)
     if simulate:
         return loss_fn(solve(scene, config, ts), scene)
@@ -242,6 +332,13 @@ def _forward_mode(f):
 def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
     """Loss and gradient from the sensitivities integrated with the state
     (`jaxstring._sensitivity.derivatives`)."""
+    if isinstance(frozen, _Experiments):
+        parts = [
+            _sensitivity_value_and_grad(th, p, f, loss_fn, config, ts)
+            for th, p, f in frozen.each(theta)
+        ]
+        value = sum(v for v, _ in parts)
+        return value, frozen.gather(theta, [g for _, g in parts])
     flat, unravel = jfu.ravel_pytree(theta)
     scene_of = lambda x: eqx.combine(_from_theta(unravel(x), pos), frozen)
     is_log = jfu.ravel_pytree(
@@ -254,7 +351,9 @@ def _sensitivity_value_and_grad(theta, pos, frozen, loss_fn, config, ts):
 def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
     f = lambda th: _objective(th, pos, frozen, loss_fn, config, simulate, ts)
     adjoint = config.adjoint_for("gradient")
-    if isinstance(adjoint, SensitivityAdjoint):
+    if isinstance(frozen, _RemoteExperiments):
+        f = frozen.loss()
+    elif isinstance(adjoint, SensitivityAdjoint):
         f = _with_gradient(
             f,
             lambda th: _sensitivity_value_and_grad(
@@ -265,6 +364,92 @@ def _value_and_grad(theta, pos, frozen, loss_fn, config, simulate, ts):
         f = _forward_mode(f)
     value, grad = jax.value_and_grad(f)(theta)
     return value, grad, f
+
+
+def _experiment_loss(x, template, frozen, pos, getters, loss_fn, config, ts):
+    """One experiment's loss and its gradient d loss / d x at the fit's
+    parameters `x` (in the optimised variables, stacked): the program a worker
+    runs."""
+    values = [x[i] for i in range(x.shape[0])]
+    theta = eqx.tree_at(lambda t: [g(t) for g in getters], template, values)
+    value, grad, _ = _value_and_grad(theta, pos, frozen, loss_fn, config, True, ts)
+    return value, jnp.stack([jnp.asarray(g(grad), jnp.float64) for g in getters])
+
+
+class _FitEvaluations:
+    """The experiments of a fit as exported programs (loss and gradient) and their
+    arrays, evaluated in worker processes at the parameters of each step."""
+
+    def __init__(self, x0, experiments, loss_fn, config, ts, executor, workers):
+        self.executor, self.workers = executor, workers
+        self.n = x0.shape[0]
+        self.programs, self.leaves = [], []
+        for template, frozen, pos, getters in experiments:
+            with checks_as_nan():
+                key, program, leaves, _ = _distribute.export_chunk(
+                    _experiment_loss,
+                    (x0, template, frozen, pos, getters, loss_fn, config, ts),
+                )
+            self.programs.append((key, program))
+            self.leaves.append([np.asarray(v) for v in leaves[1:]])
+        self.failed = {}  # experiment index -> why its worker failed
+
+    def __call__(self, x):
+        own = self.executor is None
+        pool = _distribute.process_pool(self.workers) if own else self.executor
+        x = np.asarray(x)
+        tasks = [(*p, [x] + rest) for p, rest in zip(self.programs, self.leaves)]
+        value, grad = 0.0, np.zeros(self.n)
+        for i, out in enumerate(_distribute.run_tasks(pool, tasks, own)):
+            if isinstance(out, str):
+                self.failed.setdefault(i, out)
+                return np.asarray(np.nan), np.full(self.n, np.nan)
+            value += float(out[0])
+            grad += np.asarray(out[1], np.float64)
+        return np.asarray(value, np.float64), grad
+
+
+_FIT_RUNS = {}  # token -> the `_FitEvaluations` of a running fit
+
+
+def _host_fit_evaluate(token, x):
+    return _FIT_RUNS[int(token)](x)
+
+
+def _experiments(scenes, loss_fn, params, positive, config, processes, executor):
+    """The fit's own parameters and the form of its experiments: `frozen` is the
+    first scene's frozen part (one scene in this process), an `_Experiments`
+    (several in this process) or a `_RemoteExperiments` (in worker processes);
+    with the evaluations of the workers (or None) and their number."""
+    getters, theta, pos, frozen, cfg, ts = _setup(
+        scenes[0], loss_fn, params, positive, True, config, count_steps=True
+    )
+    parts = [(theta, frozen, pos, tuple(getters))]
+    for sc in scenes[1:]:
+        g, th, p, f, c, _ = _setup(
+            sc, loss_fn, params, positive, True, config, count_steps=True
+        )
+        parts.append((th, f, p, tuple(g)))
+        if isinstance(c.checkpoints, int) and isinstance(cfg.checkpoints, int):
+            cfg = cfg.replace(checkpoints=max(c.checkpoints, cfg.checkpoints))
+    workers = _distribute.experiment_workers(
+        processes, executor, len(scenes), cfg.on_cpu()
+    )
+    evaluations = None
+    if executor is not None or workers > 1:
+        x0 = jnp.stack([jnp.asarray(g(theta), jnp.float64) for g in getters])
+        evaluations = _FitEvaluations(x0, parts, loss_fn, cfg, ts, executor, workers)
+        token = max(_FIT_RUNS, default=0) + 1
+        _FIT_RUNS[token] = evaluations
+        frozen = _RemoteExperiments(jnp.asarray(token), tuple(getters))
+    elif len(scenes) > 1:
+        frozen = _Experiments(
+            templates=tuple(p[0] for p in parts),
+            frozens=tuple(p[1] for p in parts),
+            poss=tuple(p[2] for p in parts),
+            getters=tuple(p[3] for p in parts),
+        )
+    return getters, theta, pos, parts[0][1], frozen, cfg, ts, evaluations, workers
 
 
 @cpu_jit
@@ -394,7 +579,7 @@ def value_and_grad(
 
 @single_blas_thread
 def fit(
-    scene: Scene,
+    scene: Scene | Sequence[Scene],
     loss_fn: Callable,
     params: Sequence,
     *,
@@ -406,6 +591,8 @@ def fit(
     gtol: float | None = None,
     print_every: int | None = 10,
     callback: Callable | None = None,
+    processes="auto",
+    executor=None,
     config: SolveConfig | None = None,
     **options,
 ) -> FitResult:
@@ -414,6 +601,9 @@ def fit(
     **Arguments:**
 
     - `scene`: the starting scene; its values of `params` are the initial guess.
+      Or a list of scenes: several experiments sharing the parameters (each must
+      hold every named parameter; the first one's values are the initial guess),
+      whose losses are summed, each experiment solved on its own.
     - `loss_fn`: `loss_fn(traj, scene) -> scalar`, with `traj` the scene's
       `Trajectory` (saved at `ts`); with `simulate=False`, `loss_fn(scene) -> scalar`
       and the function simulates itself (several scenes, windows, ...: use
@@ -443,9 +633,22 @@ def fit(
     - `print_every`: print step, loss, gradient norm and values every this many
       steps (None: silent).
     - `callback`: called as `callback(step, loss, scene)` after every step.
+    - `processes`: `"auto"` (default: with two or more experiments solved on a CPU,
+      as they are under `device="auto"` also on a GPU host, one worker process per
+      experiment up to the host's cores; else this process alone), or the number
+      of worker processes. With workers, each step sends the current parameters
+      to them; each experiment's loss and gradient come from one program per
+      experiment, traced once in this process and run in jaxstring's own pool of
+      spawned processes (the pool of `sweep` and `least_squares`), and the
+      optimiser's step is taken here.
+    - `executor`: any `concurrent.futures.Executor` whose workers can import
+      jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to evaluate
+      the experiments instead. A worker that dies is replaced and its experiment
+      evaluated again; one whose evaluation fails twice stops the fit with a
+      message naming the experiment.
 
-    **Returns:** a `FitResult` (fitted scene, loss history, final gradient norm,
-    parameter history).
+    **Returns:** a `FitResult` (fitted scene -- the first experiment's --, loss
+    history, final gradient norm, parameter history).
     """
     # Checked before `_setup`, which with checkpoints="auto" runs a solve.
     check_int("steps", steps, 1)
@@ -465,16 +668,60 @@ def fit(
             f"`callback` must be callable as callback(step, loss, scene); got "
             f"{callback!r}."
         )
-    config = identify_config(scene, config, options, "gradient", simulate)
-    getters, theta, pos, frozen, config, ts = _setup(
-        scene, loss_fn, params, positive, simulate, config, count_steps=True
-    )
+    scenes = tuple(scene) if isinstance(scene, (list, tuple)) else (scene,)
+    if not scenes or not all(isinstance(s, Scene) for s in scenes):
+        raise ValueError(
+            "`scene` must be a jaxstring Scene or a non-empty list of Scenes."
+        )
+    _distribute.check_workers(processes, executor)
+    several = len(scenes) > 1 or executor is not None or processes != "auto"
+    if several and not simulate:
+        raise ValueError(
+            "`scene`: several experiments, `processes` and `executor` need "
+            "simulate=True (a loss that simulates itself takes one scene)."
+        )
+    config = identify_config(scenes[0], config, options, "gradient", simulate)
+    for sc in scenes[1:]:
+        config.check_scene(sc)
+    evaluations, workers = None, 1
+    if several:
+        getters, theta, pos, frozen0, frozen, config, ts, evaluations, workers = (
+            _experiments(scenes, loss_fn, params, positive, config, processes,
+                         executor)
+        )  # fmt: skip
+    else:
+        getters, theta, pos, frozen, config, ts = _setup(
+            scene, loss_fn, params, positive, simulate, config, count_steps=True
+        )
+        frozen0 = frozen
+    try:
+        return _fit_loop(
+            scenes[0], getters, theta, pos, frozen0, frozen, config, ts, loss_fn,
+            simulate, steps, optimizer, learning_rate, gtol, print_every, callback,
+            evaluations, workers,
+        )  # fmt: skip
+    finally:
+        for token in [k for k, v in _FIT_RUNS.items() if v is evaluations]:
+            del _FIT_RUNS[token]
+
+
+def _fit_loop(scene, getters, theta, pos, frozen0, frozen, config, ts, loss_fn,
+              simulate, steps, optimizer, learning_rate, gtol, print_every,
+              callback, evaluations, workers):  # fmt: skip
+    """`fit`'s optimisation loop, its arguments checked and its experiments set up."""
     adj = config.adjoint_for("gradient")
     theta, frozen, config, ts = config.placed((theta, frozen, config, ts))
     if optimizer is None:
         optimizer = optax.adam(learning_rate)
     optimizer = optax.with_extra_args_support(optimizer)
+    # Strongly typed and committed to the solve's device, as the step returns
+    # them: a weakly typed start (a parameter given as a Python float), or one not
+    # committed where data the loss holds are, would compile the step again at its
+    # second call.
+    device = config.solve_device()
+    theta = _strongly_typed(theta, device)
     opt_state = optimizer.init(eqx.filter(theta, eqx.is_inexact_array))
+    opt_state = _strongly_typed(opt_state, device)
 
     labels = tuple(g.label for g in getters)
     history = {n: [] for n in labels}
@@ -509,11 +756,17 @@ def fit(
                 f"step {i}: loss or gradient not finite (a failed solve?); stopped at "
                 "the last good parameters"
             )
+            if evaluations is not None and evaluations.failed:
+                j, why = min(evaluations.failed.items())
+                message = (
+                    f"step {i}: the worker evaluating experiment {j} failed twice "
+                    f"({why}); stopped at the last good parameters"
+                )
             if print_every:
                 print(message)
             break
         theta = new_theta
-        current = eqx.combine(_from_theta(theta, pos), frozen)
+        current = eqx.combine(_from_theta(theta, pos), frozen0)
         record(current)
         if print_every and (i % print_every == 0 or i == steps - 1):
             vals = "  ".join(
@@ -541,6 +794,7 @@ def fit(
         message=message,
         compile_time=compile_time,
         run_time=run_time,
+        processes=workers,
     )
 
 

@@ -276,13 +276,9 @@ def _workers(processes, executor, scenes, config) -> int:
     with "auto" one per experiment up to the host's cores where there are several
     experiments and `config` solves on a CPU (also on a GPU host, by default); 0
     for a user's executor."""
-    if executor is not None:
-        return 0
-    if processes != "auto":
-        return int(processes)
-    if not config.on_cpu() or len(scenes) < 2:
-        return 1
-    return min(_distribute.host_cores(), len(scenes))
+    return _distribute.experiment_workers(
+        processes, executor, len(scenes), config.on_cpu()
+    )
 
 
 @eqx.filter_jit

@@ -239,6 +239,14 @@ class SolveConfig(eqx.Module):
             return jax.default_backend() == "cpu"
         return self.device.platform == "cpu"
 
+    def solve_device(self):
+        """The `jax.Device` a single solve of this configuration runs on."""
+        if self.device == "auto":
+            return jax.devices("cpu")[0]
+        if self.device == "default":
+            return jax.devices()[0]
+        return self.device
+
     def placed(self, tree):
         """`tree` (a solve's arguments) on the configuration's device: the host CPU
         under "auto", as it is under "default"."""

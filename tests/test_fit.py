@@ -1,6 +1,7 @@
 """fit and gradients: derivatives against finite differences; identification of
 alpha and EA from noisy positions of a finer, independently integrated string."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optax
@@ -156,3 +157,84 @@ def test_sensitivity_gradient_matches_central_differences(positive):
     assert_grad_matches_central_differences(
         lambda s: _end_loss(_fit.solve(s, config), s), scene, grad
     )
+
+
+# Two experiments of one structure: the k = 3 pendulum released at two angles.
+TS_TWO = jnp.linspace(0.0, 0.3, 11)
+TIGHT = dict(rtol=1e-10, atol=1e-10)
+FORWARD = dict(TIGHT, adjoint="forward")  # one parameter: forward mode
+
+
+def _two_experiments(alpha):
+    return [
+        js.string_pendulum(k=3, EA=1e3, alpha=alpha, theta0=a, t1=0.3)
+        for a in (1.2, 0.6)
+    ]
+
+
+class _EndMassMisfit(eqx.Module):
+    """Squared end-mass misfit of an experiment against its own data, found by
+    its start position."""
+
+    data: jnp.ndarray
+
+    def __call__(self, traj, scene):
+        del scene
+        i = jnp.argmin(jnp.sum((self.data[:, 0] - traj.end_mass[0]) ** 2, axis=1))
+        return jnp.sum((traj.end_mass - self.data[i]) ** 2)
+
+
+def _two_experiment_loss():
+    ends = [js.simulate(s, ts=TS_TWO, **TIGHT).end_mass for s in _two_experiments(0.05)]
+    return _EndMassMisfit(jnp.stack(ends))
+
+
+def test_a_fit_of_several_experiments_sums_their_losses_and_gradients():
+    loss = _two_experiment_loss()
+    starts = _two_experiments(0.07)
+    res = js.fit(starts, loss, ["alpha"], steps=1, ts=TS_TWO, print_every=None,
+                 processes=1, **FORWARD)  # fmt: skip
+    parts = [
+        _fit.value_and_grad(s, loss, ["alpha"], ts=TS_TWO, **FORWARD) for s in starts
+    ]
+    value = sum(v for v, _ in parts)
+    grad = sum(float(g["alpha"]) for _, g in parts)
+    assert value > 1e-6  # the start is off the data
+    assert abs(res.losses[0] - value) <= 1e-12 * value
+    # the gradient in the optimised variable log(alpha): alpha dL/dalpha
+    assert abs(res.grad_norm - abs(0.07 * grad)) <= 1e-9 * abs(0.07 * grad)
+    assert res.processes == 1
+    for kw, part in [
+        (dict(scene=[starts[0], "x"]), "`scene`"),
+        (dict(scene=[]), "`scene`"),
+        (dict(processes=0), "`processes`"),
+        (dict(simulate=False), "simulate=True"),
+    ]:
+        args = dict(scene=starts, loss_fn=loss, params=["alpha"]) | kw
+        with pytest.raises(ValueError, match=part):
+            js.fit(**args)
+
+
+@pytest.mark.slow
+def test_experiments_in_worker_processes_give_the_one_process_fit():
+    loss = _two_experiment_loss()
+    kw = dict(steps=8, optimizer=optax.lbfgs(), ts=TS_TWO, print_every=None, **FORWARD)
+    one = js.fit(_two_experiments(0.07), loss, ["alpha"], processes=1, **kw)
+    two = js.fit(_two_experiments(0.07), loss, ["alpha"], processes=2, **kw)
+    assert two.processes == 2
+    assert np.allclose(two.losses, one.losses, rtol=1e-9, atol=1e-18)
+    assert abs(two.values()["alpha"] - one.values()["alpha"]) <= 1e-9
+    assert abs(two.values()["alpha"] - 0.05) <= 1e-6  # the data's damping
+
+
+def test_a_fit_compiles_its_step_once():
+    # The start's parameter is a Python float (a weakly typed leaf) and the loss
+    # holds data from a solve: the step's later calls reuse its first compilation.
+    scene = js.string_pendulum(k=2, EA=1e3, alpha=0.03, t1=0.1)
+    ts = jnp.linspace(0.0, 0.1, 7)
+    data = js.simulate(js.string_pendulum(k=2, EA=1e3, alpha=0.02, t1=0.1), ts=ts)
+    before = _fit._make_step.cache_size()
+    res = js.fit(scene, _EndMassMisfit(data.end_mass[None]), ["alpha"], steps=3,
+                 ts=ts, print_every=None, adjoint="forward")  # fmt: skip
+    assert _fit._make_step.cache_size() - before == 1
+    assert res.losses[-1] < res.losses[0]
