@@ -646,6 +646,15 @@ STUDIES = (
         ),
     ),
     Study(
+        "sweep_distributed",
+        "sweep_distributed.py",
+        "a sweep over two jax.distributed processes against one process",
+        "3 min",
+        (*PENDULUM, "jaxstring/_sweep.py", "jaxstring/_distribute.py"),
+        (Run((), _files("sweep_distributed")),),
+        quick=(),
+    ),
+    Study(
         "placement",
         "placement.py",
         "where one simulate or least_squares runs on a host with a GPU",
