@@ -1,10 +1,13 @@
-"""Shared helpers: cached simulations so that tests reuse compiled solves, and a
-process pool whose workers die on cue."""
+"""Shared helpers: cached simulations so that tests reuse compiled solves, a
+process pool whose workers die on cue, and a fresh process with two CPU devices."""
 
 import concurrent.futures as cf
 import functools
 import multiprocessing
 import os
+import subprocess
+import sys
+import textwrap
 
 import jax
 import jax.numpy as jnp
@@ -153,3 +156,16 @@ def string_vf(formulation, k):
     scene = js.string_pendulum(formulation, k=k, EA=1e6, theta0=1.0)
     y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
     return (lambda u, s: s.vector_field(0.0, u)), y, scene
+
+
+def run_on_two_cpu_devices(code: str, timeout: float = 300) -> str:
+    """Run `code` (dedented) in a fresh Python process whose JAX has two CPU
+    devices (the device count is fixed when JAX starts); its standard output.
+    Fails the test with the end of its standard error if it fails."""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], env=env, capture_output=True,
+        text=True, timeout=timeout,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout

@@ -2,9 +2,6 @@
 through the same `solve`, so they give the same trajectory; a solve placed on a
 named device runs there with the same result."""
 
-import os
-import subprocess
-import sys
 import textwrap
 
 import jax
@@ -13,6 +10,8 @@ import numpy as np
 import pytest
 
 import jaxstring as js
+
+from .helpers import run_on_two_cpu_devices
 
 
 def test_simulate_fit_and_sweep_give_the_same_trajectory():
@@ -103,12 +102,6 @@ def test_solves_on_a_named_second_device_equal_those_on_the_first():
               fits[1].values["alpha"])
         """
     )
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True,
-        timeout=300,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr[-2000:]
-    ends, fits, alpha = map(float, out.stdout.split())
+    ends, fits, alpha = map(float, run_on_two_cpu_devices(code).split())
     assert ends < 1e-12 and fits < 1e-12
     assert abs(alpha - 0.02) < 1e-6  # the fit finds the damping of the data

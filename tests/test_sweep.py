@@ -5,9 +5,6 @@ solver tolerance, as well as the loop does; its block-diagonal Newton linear alg
 equals per-member dense solves. With a fixed step (members' nodes concatenated into
 one banded system) the lockstep sweep equals the loop to rounding."""
 
-import os
-import subprocess
-import sys
 import textwrap
 
 import equinox as eqx
@@ -20,6 +17,8 @@ import jaxstring as js
 from jaxstring import _linalg
 from jaxstring._solvers.stage_newton import batched_factor
 from jaxstring._sweep import member_rms_max, sweep
+
+from .helpers import run_on_two_cpu_devices
 
 
 def _end_and_tension(traj, scene):
@@ -96,16 +95,8 @@ def test_grid_shape_and_sharding_over_two_cpu_devices():
         print(float(np.max(np.abs(two.out - one.out))))
         """
     )
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert float(out.stdout.strip().splitlines()[-1]) < 1e-12
+    out = run_on_two_cpu_devices(code)
+    assert float(out.strip().splitlines()[-1]) < 1e-12
 
 
 @pytest.mark.slow
@@ -131,13 +122,7 @@ def test_bdf_groups_on_two_cpu_devices_repeat_and_match_one_device():
             print(float(np.max(np.abs(np.asarray(two.out) - one))))
         """
     )
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True,
-        timeout=240,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr[-2000:]
-    diffs = [float(x) for x in out.stdout.split()]
+    diffs = [float(x) for x in run_on_two_cpu_devices(code, timeout=240).split()]
     assert len(diffs) == 3 and max(diffs) < 1e-12, diffs
 
 
