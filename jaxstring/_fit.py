@@ -219,6 +219,18 @@ def _from_theta(theta, pos):
     return jtu.tree_map(lambda x, p: jnp.exp(x) if p else x, theta, pos)
 
 
+def _stacked(theta, getters):
+    """The fitted parameters of `theta` (in the optimised variables) as a vector."""
+    return jnp.stack([jnp.asarray(g(theta), jnp.float64) for g in getters])
+
+
+def _as_theta(theta, getters, values):
+    """`values` (one per getter) as a tree like `theta`, zero elsewhere: a gradient
+    in the fit's variables."""
+    zero = jtu.tree_map(jnp.zeros_like, theta)
+    return eqx.tree_at(lambda t: [g(t) for g in getters], zero, list(values))
+
+
 class _Experiments(eqx.Module):
     """Several experiments fitted together in this process: each its own
     parameter tree (in the optimised variables), positivity flags, frozen part
@@ -245,8 +257,7 @@ class _Experiments(eqx.Module):
         total = [
             sum(g(grad) for g, grad in zip(gs, grads)) for gs in zip(*self.getters)
         ]
-        zero = jtu.tree_map(jnp.zeros_like, theta)
-        return eqx.tree_at(lambda t: [g(t) for g in self.getters[0]], zero, total)
+        return _as_theta(theta, self.getters[0], total)
 
 
 class _RemoteExperiments(eqx.Module):
@@ -256,15 +267,12 @@ class _RemoteExperiments(eqx.Module):
     token: Any
     getters: tuple = eqx.field(static=True)
 
-    def x(self, theta):
-        return jnp.stack([jnp.asarray(g(theta), jnp.float64) for g in self.getters])
-
     def loss(self):
         """The loss of all experiments as a function of theta, with its gradient
         from the same evaluation in the workers."""
 
         def evaluate(theta):
-            x = self.x(theta)
+            x = _stacked(theta, self.getters)
             shapes = (
                 jax.ShapeDtypeStruct((), jnp.float64),
                 jax.ShapeDtypeStruct(x.shape, jnp.float64),
@@ -275,13 +283,7 @@ class _RemoteExperiments(eqx.Module):
 
         def value_and_grad(theta):
             value, g = evaluate(theta)
-            zero = jtu.tree_map(jnp.zeros_like, theta)
-            grad = eqx.tree_at(
-                lambda t: [gg(t) for gg in self.getters],
-                zero,
-                [g[i] for i in range(len(self.getters))],
-            )
-            return value, grad
+            return value, _as_theta(theta, self.getters, list(g))
 
         return _with_gradient(lambda theta: evaluate(theta)[0], value_and_grad)
 
@@ -437,7 +439,7 @@ def _experiments(scenes, loss_fn, params, positive, config, processes, executor)
     )
     evaluations = None
     if executor is not None or workers > 1:
-        x0 = jnp.stack([jnp.asarray(g(theta), jnp.float64) for g in getters])
+        x0 = _stacked(theta, getters)
         evaluations = _FitEvaluations(x0, parts, loss_fn, cfg, ts, executor, workers)
         token = max(_FIT_RUNS, default=0) + 1
         _FIT_RUNS[token] = evaluations
