@@ -12,6 +12,7 @@ import dataclasses
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from . import _programs
@@ -181,13 +182,53 @@ def _solve_fields(scene, config, ts):
     return fields | {"result": result_code(traj.result)}
 
 
+def padded_length(n: int) -> int:
+    """The number of save times a compiled solve is traced for when `n` are asked:
+    the next power of two (at least 8) up to 4096, the next multiple of 4096 above.
+    Solves of one scene structure with 11, 41 or 101 save times share one program,
+    so a new `n_save` or `ts` rarely costs a compilation."""
+    if n <= 4096:
+        return max(8, 1 << (n - 1).bit_length())
+    return -(-n // 4096) * 4096
+
+
+def _padded(ts):
+    """`ts` with its last time repeated up to `padded_length(len(ts))` entries
+    (diffrax saves a repeated time twice)."""
+    n = ts.shape[0]
+    extra = padded_length(n) - n
+    if extra == 0:
+        return ts
+    return jnp.concatenate([ts, jnp.broadcast_to(ts[-1:], (extra,))])
+
+
+def _first_rows(traj: Trajectory, n: int) -> Trajectory:
+    """`traj` cut to its first `n` save times (the padded ones dropped): `t_end` is
+    the same, as the padding repeats the last time."""
+    if traj.ts.shape[0] == n:
+        return traj
+    cut = lambda x: x[:n]
+    return dataclasses.replace(
+        traj,
+        ts=cut(traj.ts),
+        ys=cut(traj.ys),
+        obs=jax.tree_util.tree_map(cut, traj.obs),
+        n_valid=jnp.minimum(traj.n_valid, n),
+    )
+
+
 def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:
-    """`solve`, compiled; through a saved program where one can be saved (see
-    `jaxstring._programs`)."""
+    """`solve`, compiled, for save times padded to `padded_length` and cut back;
+    through a saved program where one can be saved (see `jaxstring._programs`)."""
+    n = ts.shape[0]
+    ts = _padded(ts)
+    # the padded times decide the save times; n_save is static, so one value serves
+    config = config.replace(n_save=ts.shape[0])
     if not config.progress and _programs.usable((scene, config, ts)):
         fields = _programs.call(_solve_fields, scene, config, ts)
         if fields is not None:
-            return Trajectory(
+            traj = Trajectory(
                 **(fields | {"result": result_from_code(fields["result"])})
             )
-    return jit_solve(scene, config, ts)
+            return _first_rows(traj, n)
+    return _first_rows(jit_solve(scene, config, ts), n)

@@ -5,9 +5,8 @@ directory), and its results are checked against physics or an independent solver
 the external references agree with jaxstring on the identical right-hand side, the
 band Jacobian equals the dense one, MoorDyn and jaxstring swing the same pendulum.
 Timings are never asserted (speed is shown by the scripts themselves). On the shared
-2-core machine the whole module takes several minutes, so every script except the
-work-precision one is marked slow; the band-Jacobian check and the work-precision
-smoke run stay in the default run.
+2-core machine the whole module takes several minutes, so every script's run is
+marked slow; the band-Jacobian check stays in the default run.
 
 The quick sizes share one compiled jaxstring solve (angle formulation, k = 8,
 Kvaerno5, 41 save times) wherever they can, to stay within CI time.
@@ -150,6 +149,7 @@ def test_fig9_quick(results_in_tmp):
     # tests/pendulum/test_formulation_gap.py.
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not HAS_SUNDAE, reason="scikit-sundae (bench extra) not installed")
 def test_work_precision_quick(results_in_tmp):
     rows, head = _module("work_precision").main(quick=True)

@@ -97,6 +97,26 @@ def test_same_structure_does_not_recompile_for_new_parameter_values():
     assert _integrate.jit_solve.cache_size() - before <= 1
 
 
+def test_other_save_times_reuse_the_compiled_solve_and_give_the_same_rows():
+    # A compiled solve saves at its save times padded to the next power of two, so
+    # 13 and 9 save times (both padded to 16) share one program; the steps do not
+    # depend on the save times, so the rows at the common times are equal.
+    from jaxstring import _integrate
+
+    scene = js.string_pendulum(k=6, EA=1e4, alpha=0.01, t1=0.05)
+    ts = jnp.linspace(0.0, 0.05, 13)
+    before = _integrate.jit_solve.cache_size()
+    full = js.simulate(scene, ts=ts)
+    part = js.simulate(scene, ts=ts[:9])
+    assert _integrate.jit_solve.cache_size() - before == 1
+    assert full.ok and part.ok and part.ys.shape[0] == 9
+    assert int(part.n_valid) == 9 and float(part.t_end) == float(ts[8])
+    np.testing.assert_allclose(
+        np.asarray(part.end_mass), np.asarray(full.end_mass[:9]), rtol=0, atol=1e-12
+    )
+    assert float(jnp.ptp(full.end_mass[:, 1])) > 1e-3  # it moves
+
+
 @functools.cache
 def _system_scenes():
     """One small scene of each system."""

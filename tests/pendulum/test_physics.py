@@ -43,7 +43,16 @@ def _axial_mode_scene(formulation, k, EA, V, t1):
     return scene, omega
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
+# The natural form integrates the displacement form's mechanics (the formulations'
+# agreement: test_natural_and_angle_forms_are_one_semi_discrete_system and the slow
+# convergence test): its analytic limits are slow checks.
+DISPLACEMENT_FAST = (
+    "displacement",
+    *(pytest.param(f, marks=pytest.mark.slow) for f in FORMULATIONS[1:]),
+)
+
+
+@pytest.mark.parametrize("formulation", DISPLACEMENT_FAST)
 def test_axial_frequency_of_bar_with_tip_mass(formulation):
     # beta tan(beta) = mu l / m_s, omega = (beta / l) sqrt(EA / mu): within 1 % at k=40.
     scene, omega = _axial_mode_scene(formulation, k=40, EA=1e4, V=1e-3, t1=0.25)
@@ -58,7 +67,7 @@ def test_axial_frequency_of_bar_with_tip_mass(formulation):
     assert rel < 0.01, f"{formulation}: omega error {rel:.2e}"
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS_FAST)
+@pytest.mark.parametrize("formulation", DISPLACEMENT_FAST)
 def test_small_amplitude_period_light_string(formulation):
     # mu l = 1e-3 m_s: a simple pendulum of the stretched length, with the compound
     # correction of the string mass and the finite-amplitude factor (1 + theta0^2/16).
