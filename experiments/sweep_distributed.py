@@ -30,6 +30,12 @@ K, EA, T1 = 40, 1e6, 2.0
 TS = np.linspace(0.0, T1, 5)
 
 
+def _end_mass(traj, scene):
+    # One function object for every call: a new lambda per call is a new static
+    # argument, so each call would compile the sweep again.
+    return traj.end_mass
+
+
 def _sweep(members):
     import jaxstring as js
 
@@ -39,7 +45,7 @@ def _sweep(members):
         res = js.sweep(
             js.string_pendulum(k=K, EA=EA, t1=T1),
             {"alpha": np.linspace(0.005, 0.05, members)},
-            lambda traj, scene: traj.end_mass,
+            _end_mass,
             ts=TS,
             processes=1,
         )
@@ -82,7 +88,10 @@ def _free_port():
 
 
 def _run(address, ids, members, folder):
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    # No compilation cache: every process compiles its programs (JAX writes its
+    # persistent cache from process 0 of a job only, so a cache would serve the
+    # lone process and process 0, not process 1).
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", JAXSTRING_CACHE="off")
     procs, outs = [], []
     for i in ids:
         out = os.path.join(folder, f"p{i}_{address.replace(':', '_')}")
