@@ -15,6 +15,7 @@ import contextlib
 import functools
 import sys
 import threading
+import types
 
 import equinox as eqx
 import jax
@@ -51,17 +52,80 @@ def compile_notice(name: str):
         timer.cancel()
 
 
+class _SameCode:
+    """A Python function among a compiled call's static arguments, equal to any
+    function with the same code object, globals, defaults and captured objects
+    (compared by identity). A lambda written in a call, such as the summary of a
+    sweep or the loss of a fit, is a new function object at every call; keyed by
+    identity it would compile the program again each time, keyed by its code it
+    reuses it."""
+
+    __slots__ = ("fn", "_key")
+
+    def __init__(self, fn):
+        self.fn = fn
+        cells = tuple(_contents(c) for c in fn.__closure__ or ())
+        kwdefaults = tuple(sorted((fn.__kwdefaults__ or {}).items()))
+        self._key = (
+            fn.__code__,
+            fn.__globals__,
+            fn.__defaults__ or (),
+            kwdefaults,
+            cells,
+        )
+
+    def __eq__(self, other):
+        if not isinstance(other, _SameCode):
+            return NotImplemented
+        return len(self._key) == len(other._key) and all(
+            _same(a, b) for a, b in zip(self._key, other._key)
+        )
+
+    def __hash__(self):
+        return hash(self._key[0])
+
+
+def _contents(cell):
+    """What a closure cell holds (the cell itself while it is still empty)."""
+    try:
+        return cell.cell_contents
+    except ValueError:
+        return cell
+
+
+def _same(a, b):
+    """Identity, element by element for tuples (defaults, captured objects)."""
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a is b
+
+
+def _code_keyed(static):
+    return jtu.tree_map(
+        lambda x: _SameCode(x) if isinstance(x, types.FunctionType) else x, static
+    )
+
+
+def _unwrapped(static):
+    return jtu.tree_map(lambda x: x.fn if isinstance(x, _SameCode) else x, static)
+
+
 def cpu_jit(fun):
     """Like `eqx.filter_jit` (arrays traced, everything else static and hashable),
-    compiled with `CPU_COMPILER_OPTIONS` when every array argument is on the CPU."""
+    compiled with `CPU_COMPILER_OPTIONS` when every array argument is on the CPU.
+    Python functions among the static arguments are keyed by their code
+    (`_SameCode`), not by identity."""
 
     def call(dynamic, static):
-        args, items = eqx.combine(dynamic, static)
+        args, items = eqx.combine(dynamic, _unwrapped(static))
         return fun(*args, **dict(items))
 
     def split(args, kwargs):
         # keyword arguments as sorted (name, value) pairs: hashable when static
-        return eqx.partition((args, tuple(sorted(kwargs.items()))), eqx.is_array)
+        dynamic, static = eqx.partition(
+            (args, tuple(sorted(kwargs.items()))), eqx.is_array
+        )
+        return dynamic, _code_keyed(static)
 
     jitted = {
         True: jax.jit(call, static_argnums=1, compiler_options=CPU_COMPILER_OPTIONS),

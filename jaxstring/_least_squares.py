@@ -39,6 +39,7 @@ from . import _distribute
 from ._blas import single_blas_thread
 from ._fit import check_jacobian_adjoint, identify_config, resolve, resolve_params
 from ._integrate import solve
+from ._jit import cpu_jit
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig
@@ -281,8 +282,8 @@ def _workers(processes, executor, scenes, config) -> int:
     )
 
 
-@eqx.filter_jit
-def _solve_ls(problem, theta0, rtol, atol, max_iters):
+@cpu_jit
+def _levenberg_marquardt(problem, theta0, rtol, atol, max_iters):
     sol = optx.least_squares(
         problem.residuals,
         optx.LevenbergMarquardt(rtol=rtol, atol=atol),
@@ -469,7 +470,7 @@ def least_squares(
         m = eqx.filter_eval_shape(problem.residuals, theta0).shape[0]
         _check_count(m, len(getters))
         theta, r0, r, J, result, iters = jax.block_until_ready(
-            _solve_ls(problem, theta0, tol, tol, max_iters)
+            _levenberg_marquardt(problem, tuple(theta0), tol, tol, max_iters)
         )
         failed = {}
     else:
@@ -483,7 +484,7 @@ def least_squares(
         remote = _Remote(jnp.asarray(token), sum(evaluations.sizes), positive)
         try:
             theta, r0, r, J, result, iters = jax.block_until_ready(
-                _solve_ls(remote, theta0, tol, tol, max_iters)
+                _levenberg_marquardt(remote, tuple(theta0), tol, tol, max_iters)
             )
         finally:
             del _RUNS[token]

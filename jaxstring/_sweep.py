@@ -654,8 +654,9 @@ def sweep(
     - `fn`: `fn(traj, scene) -> pytree of arrays` evaluated on each member's
       `Trajectory` inside the compiled call (e.g. a period, the maximum tension);
       default: all observables `traj.obs`. It is part of the compiled program's
-      key: pass the same function object to reuse a compiled sweep (a lambda
-      written in the call is a new function at every call, and compiles anew).
+      key by its code and the objects it captures: a lambda written anew in the
+      same place reuses the compiled sweep; one capturing other objects compiles
+      its own.
     - `config`: the `SolveConfig` of every member's solve (default:
       `SolveConfig.default("sweep")`); `options`: its fields as shortcuts
       (`solver`, `rtol`, `atol`, `ts`, `n_save`, `dt0`, `newton_rtol`,

@@ -133,3 +133,27 @@ def test_first_solve_does_not_retrace_earlier_compiled_functions():
     )
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout.strip().splitlines()[-1]) == 1
+
+
+def test_a_function_written_anew_at_each_call_reuses_the_compiled_call():
+    # A lambda in a call (a sweep's summary, a fit's loss) is a new function object
+    # each time. jaxstring's compiled calls key it by its code and the objects it
+    # captures: the same lambda again reuses the program, one capturing another
+    # object compiles its own (and computes with it).
+    import jax.numpy as jnp
+
+    from jaxstring._jit import cpu_jit
+
+    apply = cpu_jit(lambda x, f: f(x))
+
+    def call(scale):
+        return apply(jnp.arange(3.0), lambda x: scale * x)
+
+    two = 2.0
+    first, again = call(two), call(two)
+    assert apply.cache_size() == 1
+    assert jnp.array_equal(first, again) and float(first[2]) == 4.0
+    assert float(call(3.0)[2]) == 6.0 and apply.cache_size() == 2
+    # other code, same captures: its own program
+    assert float(apply(jnp.arange(3.0), lambda x: x + two)[2]) == 4.0
+    assert apply.cache_size() == 3
