@@ -16,8 +16,10 @@ over this host's cores, and the processes of a `jax.distributed` job.
   every process gathers every member's result (`process_allgather`).
 * GPUs of one process run their shards side by side (`jaxstring._sweep`).
 
-`least_squares` evaluates its experiments in the same pools (`run_tasks`: one
-exported program per experiment structure, a task per experiment).
+`least_squares` and `fit` evaluate their experiments in the same pools
+(`ExperimentPrograms`: one exported program and one task per experiment); in a
+`jax.distributed` job each process evaluates its share of the experiments and every
+process gathers all of them, so that each runs the same iteration.
 """
 
 import atexit
@@ -81,9 +83,11 @@ def experiment_workers(processes, executor, n_experiments: int, on_cpu: bool) ->
         return 0
     if processes != "auto":
         return int(processes)
-    if not on_cpu or n_experiments < 2:
+    # In a jax.distributed job this process evaluates its share of them.
+    mine = math.ceil(n_experiments / jax.process_count())
+    if not on_cpu or mine < 2:
         return 1
-    return min(host_cores(), n_experiments)
+    return min(host_cores(), mine)
 
 
 def _flat(fn, args):
@@ -258,6 +262,117 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
     return merged, failed
 
 
+class ExperimentPrograms:
+    """The experiments of an identification, each `fn(x, *args)` traced once and
+    exported, evaluated at the parameters `x` of each step of the calling
+    process's iteration: in `executor` (None: jaxstring's pool of `workers`, or
+    this process for one worker). In a `jax.distributed` job process p evaluates
+    experiments p, p + P, ... and every process gathers every experiment's outputs
+    (`process_allgather`), so that all of them run the same iteration.
+
+    A call returns `combine(outputs)` with each experiment's outputs in order; an
+    experiment whose evaluation failed twice gives NaN outputs, and `failed` keeps
+    its index and the reason."""
+
+    def __init__(self, fn, experiment_args, executor, workers, combine):
+        from ._solvers.diffrax_compat import checks_as_nan
+
+        self.executor, self.workers, self.combine = executor, workers, combine
+        self.tasks, self.outputs = [], []
+        for args in experiment_args:
+            with checks_as_nan():
+                key, program, leaves, outputs = export_chunk(fn, args)
+            self.tasks.append((key, program, [np.asarray(v) for v in leaves[1:]]))
+            self.outputs.append(outputs)
+        self.failed = {}  # experiment index -> why its evaluation failed
+
+    def __call__(self, x):
+        x = np.asarray(x)
+        n_proc, me = jax.process_count(), jax.process_index()
+        mine = list(range(me, len(self.tasks), n_proc))
+        tasks = [(k, p, [x] + rest) for k, p, rest in (self.tasks[i] for i in mine)]
+        if self.executor is None and self.workers <= 1:
+            results = [_run_here(task) for task in tasks]
+        else:
+            own = self.executor is None
+            pool = process_pool(self.workers) if own else self.executor
+            results = run_tasks(pool, tasks, own)
+        outs = [None] * len(self.tasks)
+        for i, out in zip(mine, results):
+            if isinstance(out, str):
+                self.failed.setdefault(i, out)
+                out = jtu.tree_map(_failed_like, self.outputs[i])
+            outs[i] = out
+        if n_proc > 1:
+            outs = self._gathered(outs, n_proc)
+        return self.combine(outs)
+
+    def _gathered(self, outs, n_proc):
+        """Every experiment's outputs from the process that evaluated it: one
+        vector per process (this process's outputs, zeros elsewhere, and a failure
+        flag per experiment), gathered on every process."""
+        from jax.experimental import multihost_utils
+
+        flags = [float(i in self.failed) for i in range(len(outs))]
+        parts = [np.asarray(flags)]
+        for out, shape in zip(outs, self.outputs):
+            avals = jtu.tree_leaves(shape)
+            leaves = [np.zeros(a.shape) for a in avals] if out is None else out
+            for leaf in jtu.tree_leaves(leaves):
+                parts.append(np.asarray(leaf, np.float64).ravel())
+        rows = np.asarray(multihost_utils.process_allgather(np.concatenate(parts)))
+        gathered, at = [], len(outs)
+        for i, shape in enumerate(self.outputs):
+            row = rows[i % n_proc]
+            if row[i] and i not in self.failed:
+                self.failed[i] = (
+                    f"its evaluation failed in process {i % n_proc} of the "
+                    "jax.distributed job"
+                )
+            leaves, treedef = jtu.tree_flatten(shape)
+            values = []
+            for aval in leaves:
+                size = math.prod(aval.shape)
+                values.append(
+                    row[at : at + size].reshape(aval.shape).astype(aval.dtype)
+                )
+                at += size
+            gathered.append(jtu.tree_unflatten(treedef, values))
+        return gathered
+
+
+def _run_here(task):
+    """A task `(key, program, leaves)` run in this process: its outputs, or the
+    text of its failure (as `run_tasks` gives it)."""
+    try:
+        return _worker.run(*task)
+    except Exception as error:  # noqa: BLE001  (reported as the experiment's failure)
+        return f"{type(error).__name__}: {error}"
+
+
+_RUNNING = {}  # token -> the `ExperimentPrograms` of a running identification
+
+
+def register(evaluations) -> int:
+    """A token (an int) under which `evaluate_registered` finds `evaluations`
+    until `release`: host callbacks of a compiled iteration take arrays, not
+    Python objects."""
+    token = max(_RUNNING, default=0) + 1
+    _RUNNING[token] = evaluations
+    return token
+
+
+def release(evaluations) -> None:
+    """Forget `evaluations` (its identification has ended)."""
+    for token in [k for k, v in _RUNNING.items() if v is evaluations]:
+        del _RUNNING[token]
+
+
+def evaluate_registered(token, x):
+    """The registered evaluations `token` at `x` (a host callback)."""
+    return _RUNNING[int(token)](x)
+
+
 def _failed_like(aval):
     """The outputs of a failed chunk: NaN, or the failure code for integers."""
     if np.issubdtype(aval.dtype, np.floating):
@@ -311,6 +426,11 @@ def fit_group(fn, args, n: int, device, free_bytes=None, budget=0.8, probe=(4, 8
 
 # --------------------------------------------------------------------------------------
 # jax.distributed
+
+
+def distributed() -> bool:
+    """Whether this process is one of several of a `jax.distributed` job."""
+    return jax.process_count() > 1
 
 
 def process_block(n: int, group: int) -> tuple[int, int]:

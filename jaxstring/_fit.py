@@ -4,7 +4,8 @@ The same scene that `simulate` integrates is the model that is fitted: chosen ar
 leaves of the scene (a stiffness, a damping constant, a drag coefficient, a
 controller gain) are the unknowns, every other leaf stays frozen. The split is an
 `eqx.partition` with a boolean filter spec (equinox FAQ, "frozen layers"); one
-optimiser step -- simulate, loss, gradient, optax update -- is one `eqx.filter_jit`.
+optimiser step -- simulate, loss, gradient, optax update -- is one compiled call
+(`cpu_jit`).
 
 Positive parameters are optimised as log p: the update is then relative (a step of
 0.05 changes EA = 1e6 N and alpha = 0.01 s by the same 5 %), and p can never cross 0.
@@ -38,7 +39,6 @@ from ._presets import solver_for
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig, solve_config
-from ._solvers.diffrax_compat import checks_as_nan
 from ._validate import check_int, check_nonnegative, check_positive
 
 
@@ -262,7 +262,8 @@ class _Experiments(eqx.Module):
 
 class _RemoteExperiments(eqx.Module):
     """Several experiments fitted together, each evaluated (loss and gradient) in a
-    worker process: `token` names the fit's `_FitEvaluations` in `_FIT_RUNS`."""
+    worker process: `token` names the fit's `ExperimentPrograms`
+    (`_distribute.register`)."""
 
     token: Any
     getters: tuple = eqx.field(static=True)
@@ -278,7 +279,11 @@ class _RemoteExperiments(eqx.Module):
                 jax.ShapeDtypeStruct(x.shape, jnp.float64),
             )
             return jax.pure_callback(
-                _host_fit_evaluate, shapes, self.token, x, vmap_method="sequential"
+                _distribute.evaluate_registered,
+                shapes,
+                self.token,
+                x,
+                vmap_method="sequential",
             )
 
         def value_and_grad(theta):
@@ -378,44 +383,11 @@ def _experiment_loss(x, template, frozen, pos, getters, loss_fn, config, ts):
     return value, jnp.stack([jnp.asarray(g(grad), jnp.float64) for g in getters])
 
 
-class _FitEvaluations:
-    """The experiments of a fit as exported programs (loss and gradient) and their
-    arrays, evaluated in worker processes at the parameters of each step."""
-
-    def __init__(self, x0, experiments, loss_fn, config, ts, executor, workers):
-        self.executor, self.workers = executor, workers
-        self.n = x0.shape[0]
-        self.programs, self.leaves = [], []
-        for template, frozen, pos, getters in experiments:
-            with checks_as_nan():
-                key, program, leaves, _ = _distribute.export_chunk(
-                    _experiment_loss,
-                    (x0, template, frozen, pos, getters, loss_fn, config, ts),
-                )
-            self.programs.append((key, program))
-            self.leaves.append([np.asarray(v) for v in leaves[1:]])
-        self.failed = {}  # experiment index -> why its worker failed
-
-    def __call__(self, x):
-        own = self.executor is None
-        pool = _distribute.process_pool(self.workers) if own else self.executor
-        x = np.asarray(x)
-        tasks = [(*p, [x] + rest) for p, rest in zip(self.programs, self.leaves)]
-        value, grad = 0.0, np.zeros(self.n)
-        for i, out in enumerate(_distribute.run_tasks(pool, tasks, own)):
-            if isinstance(out, str):
-                self.failed.setdefault(i, out)
-                return np.asarray(np.nan), np.full(self.n, np.nan)
-            value += float(out[0])
-            grad += np.asarray(out[1], np.float64)
-        return np.asarray(value, np.float64), grad
-
-
-_FIT_RUNS = {}  # token -> the `_FitEvaluations` of a running fit
-
-
-def _host_fit_evaluate(token, x):
-    return _FIT_RUNS[int(token)](x)
+def _summed(outs):
+    """The sum of the experiments' losses and gradients (`_experiment_loss`)."""
+    value = sum(float(out[0]) for out in outs)
+    grad = sum(np.asarray(out[1], np.float64) for out in outs)
+    return np.asarray(value, np.float64), grad
 
 
 def _experiments(scenes, loss_fn, params, positive, config, processes, executor):
@@ -438,11 +410,13 @@ def _experiments(scenes, loss_fn, params, positive, config, processes, executor)
         processes, executor, len(scenes), cfg.on_cpu()
     )
     evaluations = None
-    if executor is not None or workers > 1:
+    if executor is not None or workers > 1 or _distribute.distributed():
         x0 = _stacked(theta, getters)
-        evaluations = _FitEvaluations(x0, parts, loss_fn, cfg, ts, executor, workers)
-        token = max(_FIT_RUNS, default=0) + 1
-        _FIT_RUNS[token] = evaluations
+        args = [(x0, *p, loss_fn, cfg, ts) for p in parts]
+        evaluations = _distribute.ExperimentPrograms(
+            _experiment_loss, args, executor, workers, _summed
+        )
+        token = _distribute.register(evaluations)
         frozen = _RemoteExperiments(jnp.asarray(token), tuple(getters))
     elif len(scenes) > 1:
         frozen = _Experiments(
@@ -643,6 +617,9 @@ def fit(
       experiment, traced once in this process and run in jaxstring's own pool of
       spawned processes (the pool of `sweep` and `least_squares`), and the
       optimiser's step is taken here.
+      In a `jax.distributed` job the experiments are split over the job's
+      processes (experiment i in process i mod N, in its workers if it has
+      any), and every process gathers all of them and takes the same steps.
     - `executor`: any `concurrent.futures.Executor` whose workers can import
       jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to evaluate
       the experiments instead. A worker that dies is replaced and its experiment
@@ -703,8 +680,7 @@ def fit(
             evaluations, workers,
         )  # fmt: skip
     finally:
-        for token in [k for k, v in _FIT_RUNS.items() if v is evaluations]:
-            del _FIT_RUNS[token]
+        _distribute.release(evaluations)
 
 
 def _fit_loop(scene, getters, theta, pos, frozen0, frozen, config, ts, loss_fn,

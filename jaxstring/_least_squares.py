@@ -43,7 +43,6 @@ from ._jit import cpu_jit
 from ._scene import Scene
 from ._sensitivity import derivatives
 from ._solve_config import SensitivityAdjoint, SolveConfig
-from ._solvers.diffrax_compat import checks_as_nan
 from ._validate import check_int, check_positive, show
 
 
@@ -184,42 +183,22 @@ def _experiment(x, scene, problem):
     return r, J
 
 
-class _Evaluations:
-    """The experiments of a fit as exported programs (one per structure) and their
-    arrays, evaluated in worker processes at the parameters the host's
+def _stack_outputs(outs):
+    """The residuals and Jacobians of the experiments (`_experiment`), stacked."""
+    rs = [np.asarray(out[0], np.float64) for out in outs]
+    Js = [np.asarray(out[1], np.float64) for out in outs]
+    return np.concatenate(rs), np.concatenate(Js)
+
+
+def _evaluations(problem, x0, executor, workers):
+    """The experiments of `problem` as programs evaluated in worker processes (or
+    the processes of a jax.distributed job) at the parameters the host's
     Levenberg-Marquardt iteration asks for."""
-
-    def __init__(self, problem, x0, executor, workers):
-        bare = _Problem((), None, *_problem_parts(problem))
-        self.executor, self.workers = executor, workers
-        self.n = x0.shape[0]
-        self.programs, self.leaves, self.sizes = [], [], []
-        for scene in problem.scenes:
-            with checks_as_nan():
-                key, program, leaves, outputs = _distribute.export_chunk(
-                    _experiment, (x0, scene, bare)
-                )
-            self.programs.append((key, program))
-            self.leaves.append([np.asarray(x) for x in leaves[1:]])
-            self.sizes.append(int(outputs[0].shape[0]))
-        self.failed = {}  # experiment index -> why its worker failed
-        self.calls = 0
-
-    def __call__(self, x):
-        self.calls += 1
-        own = self.executor is None
-        pool = _distribute.process_pool(self.workers) if own else self.executor
-        x = np.asarray(x)
-        tasks = [(*p, [x] + rest) for p, rest in zip(self.programs, self.leaves)]
-        results = _distribute.run_tasks(pool, tasks, own)
-        rs, Js = [], []
-        for i, (out, m) in enumerate(zip(results, self.sizes)):
-            if isinstance(out, str):
-                self.failed.setdefault(i, out)
-                out = (np.full(m, np.nan), np.full((m, self.n), np.nan))
-            rs.append(np.asarray(out[0], np.float64))
-            Js.append(np.asarray(out[1], np.float64))
-        return np.concatenate(rs), np.concatenate(Js)
+    bare = _Problem((), None, *_problem_parts(problem))
+    args = [(x0, scene, bare) for scene in problem.scenes]
+    return _distribute.ExperimentPrograms(
+        _experiment, args, executor, workers, _stack_outputs
+    )
 
 
 def _problem_parts(problem):
@@ -232,19 +211,14 @@ def _problem_parts(problem):
     )
 
 
-_RUNS = {}  # token -> the `_Evaluations` of a running fit
-
-
-def _host_evaluate(token, x):
-    return _RUNS[int(token)](x)
-
-
 def _evaluate(token, x, m):
     shapes = (
         jax.ShapeDtypeStruct((m,), jnp.float64),
         jax.ShapeDtypeStruct((m, x.shape[0]), jnp.float64),
     )
-    return jax.pure_callback(_host_evaluate, shapes, token, x, vmap_method="sequential")
+    return jax.pure_callback(
+        _distribute.evaluate_registered, shapes, token, x, vmap_method="sequential"
+    )
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
@@ -263,7 +237,7 @@ class _Remote(eqx.Module):
     """The residuals of all experiments as the host's iteration sees them: one
     evaluation in the workers gives the residuals and their Jacobian (its JVPs)."""
 
-    token: Any  # int array: the fit's `_Evaluations` in `_RUNS`
+    token: Any  # int array: the fit's `ExperimentPrograms` (`_distribute.register`)
     m: int = eqx.field(static=True)
     positive: tuple = eqx.field(static=True)
 
@@ -401,6 +375,9 @@ def least_squares(
       structure, which one process solves in one vmap, agree with it to about
       the solver's tolerance rather than to rounding. Measured:
       docs/performance.md, "Identification over processes".
+      In a `jax.distributed` job the experiments are split over the job's
+      processes (experiment i in process i mod N, in its workers if it has
+      any), and every process gathers all of them and takes the same steps.
     - `executor`: any `concurrent.futures.Executor` whose workers can import
       jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to evaluate
       the experiments instead. A worker that dies is replaced and its experiment
@@ -462,7 +439,8 @@ def least_squares(
         for v, pos in zip(starts, positive)
     ]
     start = time.perf_counter()
-    if executor is None and workers == 1:
+    one = len(scenes) == 1 or not _distribute.distributed()
+    if executor is None and workers == 1 and one:
         stacked = _stack_scenes(scenes) if len(scenes) > 1 else None
         problem = _Problem(scenes, stacked, getters, positive, residual_fn, config, ts)
         problem, theta0 = config.placed((problem, theta0))
@@ -477,17 +455,16 @@ def least_squares(
         # Each experiment's residuals and Jacobian in a worker process, the
         # Levenberg-Marquardt iteration in this one.
         problem = _Problem(scenes, None, getters, positive, residual_fn, config, ts)
-        evaluations = _Evaluations(problem, jnp.stack(theta0), executor, workers)
-        _check_count(sum(evaluations.sizes), len(getters))
-        token = max(_RUNS, default=0) + 1
-        _RUNS[token] = evaluations
-        remote = _Remote(jnp.asarray(token), sum(evaluations.sizes), positive)
+        evaluations = _evaluations(problem, jnp.stack(theta0), executor, workers)
+        m = sum(out[0].shape[0] for out in evaluations.outputs)
+        _check_count(m, len(getters))
+        remote = _Remote(jnp.asarray(_distribute.register(evaluations)), m, positive)
         try:
             theta, r0, r, J, result, iters = jax.block_until_ready(
                 _levenberg_marquardt(remote, tuple(theta0), tol, tol, max_iters)
             )
         finally:
-            del _RUNS[token]
+            _distribute.release(evaluations)
         failed = evaluations.failed
     elapsed = time.perf_counter() - start
     r0, r, J = np.asarray(r0), np.asarray(r), np.asarray(J)
@@ -518,10 +495,7 @@ def least_squares(
     if failed:
         i, reason = min(failed.items())
         converged = False
-        message = (
-            f"not converged: the worker process of experiment {i} failed twice "
-            f"({reason})"
-        )
+        message = f"not converged: the evaluation of experiment {i} failed ({reason})"
     if converged and bounds is not None:
         for name, (low, high) in bounds.items():
             v = values[labels.index(name)]

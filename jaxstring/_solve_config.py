@@ -242,9 +242,9 @@ class SolveConfig(eqx.Module):
     def solve_device(self):
         """The `jax.Device` a single solve of this configuration runs on."""
         if self.device == "auto":
-            return jax.devices("cpu")[0]
+            return jax.local_devices(backend="cpu")[0]
         if self.device == "default":
-            return jax.devices()[0]
+            return jax.local_devices()[0]
         return self.device
 
     def placed(self, tree):
@@ -256,7 +256,7 @@ class SolveConfig(eqx.Module):
         if device == "auto":
             if jax.default_backend() == "cpu":
                 return tree
-            device = jax.devices("cpu")[0]
+            device = jax.local_devices(backend="cpu")[0]
         # Only the arrays move: a solve's arguments also hold functions (a
         # residual, a summary) and other static leaves.
         dynamic, static = eqx.partition(tree, eqx.is_array)

@@ -5,6 +5,8 @@ import concurrent.futures as cf
 import functools
 import multiprocessing
 import os
+import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -169,3 +171,35 @@ def run_on_two_cpu_devices(code: str, timeout: float = 300) -> str:
     )  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout
+
+
+def run_distributed(code: str, args_of, n=2, timeout=600, alone=False) -> None:
+    """Run `code` (dedented) as a `jax.distributed` job of `n` local processes on
+    127.0.0.1: process i gets `sys.argv[1:]` = (coordinator address, i, *args_of(i));
+    `alone`: one process outside a job, its address "alone".
+    Fails the test with the end of a process's output if it fails; kills every
+    process (its whole session) that is still running at the end."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{s.getsockname()[1]}"
+    procs = []
+    try:
+        for i in range(n):
+            where = "alone" if alone else address
+            argv = [sys.executable, "-c", textwrap.dedent(code), where, str(i)]
+            procs.append(
+                subprocess.Popen(
+                    argv + [str(a) for a in args_of(i)],
+                    start_new_session=True,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.STDOUT,
+                    text=True,
+                )
+            )
+        for p in procs:
+            out, _ = p.communicate(timeout=timeout)
+            assert p.returncode == 0, out[-3000:]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)

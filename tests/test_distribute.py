@@ -4,9 +4,6 @@ bad settings are refused by name. Local processes only (127.0.0.1), bounded in
 time, cleaned up."""
 
 import concurrent.futures as cf
-import os
-import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -17,7 +14,7 @@ import pytest
 import jaxstring as js
 from jaxstring import _distribute
 
-from .helpers import KillingPool
+from .helpers import KillingPool, run_distributed
 
 
 ALPHAS = np.linspace(0.005, 0.05, 8)
@@ -132,40 +129,8 @@ _DISTRIBUTED = textwrap.dedent(
 )
 
 
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_process):
-    address = f"127.0.0.1:{_free_port()}"
-    procs = []
-    try:
-        for i in range(2):
-            procs.append(
-                subprocess.Popen(
-                    [
-                        sys.executable,
-                        "-c",
-                        _DISTRIBUTED,
-                        address,
-                        str(i),
-                        str(tmp_path / f"p{i}.npz"),
-                    ],  # fmt: skip
-                    start_new_session=True,
-                    stdout=subprocess.PIPE,
-                    stderr=subprocess.STDOUT,
-                    text=True,
-                )
-            )
-        for p in procs:
-            out, _ = p.communicate(timeout=600)
-            assert p.returncode == 0, out[-3000:]
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
+    run_distributed(_DISTRIBUTED, lambda i: [tmp_path / f"p{i}.npz"])
     for i in range(2):
         got = np.load(tmp_path / f"p{i}.npz")
         np.testing.assert_array_equal(got["result"], one_process.result)
@@ -251,3 +216,64 @@ def test_group_size_fits_the_free_memory():
     assert 4 < g < 64
     assert at(g) <= 0.8 * free * 1.02  # linear in the group size, to 2 %
     assert at(g + 2) > 0.8 * free * 0.98
+
+
+_IDENTIFY = textwrap.dedent(
+    """
+    import sys
+    import jax
+    if sys.argv[1] != "alone":
+        jax.distributed.initialize(coordinator_address=sys.argv[1], num_processes=2,
+                                   process_id=int(sys.argv[2]),
+                                   initialization_timeout=120)
+    import equinox as eqx
+    import jax.numpy as jnp
+    import numpy as np
+    import jaxstring as js
+
+    TS = np.linspace(0.0, 0.2, 9)
+
+    def scene(k, **kw):
+        return js.string_pendulum(k=k, t1=0.2, theta0=1.0, **(dict(EA=1e3) | kw))
+
+    class Misfit(eqx.Module):
+        data: tuple  # end-mass data of the 2- and the 3-element experiment
+
+        def __call__(self, traj, scene):
+            return (traj.end_mass - self.data[scene.model.k - 2]).ravel()
+
+    truth = [scene(2, alpha=0.05), scene(3, alpha=0.05)]
+    misfit = Misfit(tuple(js.simulate(s, ts=TS).end_mass for s in truth))
+    starts = [scene(2, EA=1.4e3, alpha=0.03), scene(3, EA=1.4e3, alpha=0.03)]
+    ls = js.least_squares(starts, misfit, ["alpha", "EA"], ts=TS, processes=1)
+    fit = js.fit(starts, lambda traj, sc: jnp.sum(misfit(traj, sc) ** 2), ["alpha"],
+                 steps=3, ts=TS, processes=1, print_every=None)
+    np.savez(sys.argv[3], values=[ls.values["alpha"], ls.values["EA"]],
+             cost=ls.cost, iterations=ls.iterations, converged=ls.converged,
+             losses=fit.losses, alpha=fit.values()["alpha"])
+    if sys.argv[1] != "alone":
+        jax.distributed.shutdown()
+    """
+)
+
+
+@pytest.mark.slow
+def test_identification_over_two_distributed_processes_gives_the_one_process_fit(
+    tmp_path,
+):
+    # Two experiments of different structures (2 and 3 elements): each process of
+    # the job evaluates one and gathers the other, so both run the iteration of one
+    # process, which solves them one after the other.
+    run_distributed(_IDENTIFY, lambda i: [tmp_path / f"p{i}.npz"])
+    run_distributed(_IDENTIFY, lambda i: [tmp_path / "alone.npz"], n=1, alone=True)
+    one = np.load(tmp_path / "alone.npz")
+    assert one["converged"]
+    np.testing.assert_allclose(one["values"], [0.05, 1e3], rtol=1e-6)
+    for i in range(2):
+        got = np.load(tmp_path / f"p{i}.npz")
+        assert got["converged"]
+        np.testing.assert_allclose(got["values"], one["values"], rtol=1e-10)
+        # The same steps, but for the last: rounding may stop one step earlier.
+        assert abs(int(got["iterations"]) - int(one["iterations"])) <= 1
+        np.testing.assert_allclose(got["losses"], one["losses"], rtol=1e-9)
+        assert abs(float(got["alpha"]) - float(one["alpha"])) <= 1e-9

@@ -318,4 +318,4 @@ def test_an_experiment_whose_worker_dies_is_reported_not_raised():
         )
     assert res.processes == 0
     assert not res.converged
-    assert "worker process of experiment 1 failed" in res.message
+    assert "evaluation of experiment 1 failed" in res.message
