@@ -21,8 +21,12 @@ members or more are called once), peak resident memory of the process tree, and
 on a GPU its peak memory. steps_mean / steps_max: accepted steps per member (a
 vmapped group runs until its slowest member is done).
 
+Worker processes, jaxstring's and CVODE's alike, are bound one per core where a
+pool has one per core (`jaxstring._distribute.pinned_cores`); `--no-pin` leaves
+both to the system.
+
 Run: ``python experiments/sweep_scale.py [--quick] [--members 64,256,1024]
-[--workers 1,2,16] [--name sweep_scale_gpu] [--cpu]``. Writes
+[--workers 1,2,16] [--name sweep_scale_gpu] [--cpu] [--no-pin]``. Writes
 results/<name>.{md,csv,png}. On a GPU machine the study runs it twice: on the GPU,
 and with ``--cpu`` (JAX_PLATFORMS=cpu) on the host's cores alone.
 """
@@ -30,6 +34,7 @@ and with ``--cpu`` (JAX_PLATFORMS=cpu) on the host's cores alone.
 import argparse
 import concurrent.futures as cf
 import multiprocessing
+import os
 import resource
 import time
 
@@ -65,13 +70,27 @@ def _warm_peer(_):
 _POOLS = {}
 
 
+def _pin(cores, started):
+    """Bind the n-th worker started to core n, as jaxstring binds its own
+    (`_distribute.pinned_cores`): the peer's pool is set up the same way."""
+    if cores:
+        with started.get_lock():
+            n = started.value
+            started.value += 1
+        os.sched_setaffinity(0, {cores[n % len(cores)]})
+
+
 def cvode_pool(alphas, tol, workers):
     """CVODE-numba over `workers` spawned processes (each warmed up first: numba's
     compilation is not timed; the pool is kept for the script's later calls),
-    members split evenly."""
+    members split evenly; bound one per core wherever jaxstring's workers are."""
     if workers not in _POOLS:
         ctx = multiprocessing.get_context("spawn")
-        _POOLS[workers] = cf.ProcessPoolExecutor(workers, mp_context=ctx)
+        cores = _distribute.pinned_cores(workers)
+        _POOLS[workers] = cf.ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_pin,
+            initargs=(cores, ctx.Value("i", 0)),
+        )  # fmt: skip
         list(_POOLS[workers].map(_warm_peer, range(workers)))
     parts = np.array_split(alphas, workers)
     start = time.perf_counter()
@@ -159,6 +178,7 @@ def main(quick=False, members=None, workers=None, tol=1e-6, cvode_tol=1e-6,
                 row = dict(
                     members=n,
                     processes="1 + GPU" if w == "gpu" else w,
+                    pinned=w != "gpu" and _distribute.pinned_cores(w) is not None,
                     groups="auto" if batch_size == "auto" else f"{batch_size}, sorted",
                     solver=js.SolveConfig.default("sweep").solver,
                     first_call_s=calls[0],
@@ -212,6 +232,8 @@ def _write(rows, name, workers, cores, backend, tol, cvode_tol, check):
             "members spread over the range (cvode_error_m: CVODE's own).",
             "steps_mean, steps_max: accepted steps per member; a vmapped group "
             "runs until its slowest member is done.",
+            "pinned: the workers of both pools bound one per core (a pool with as "
+            "many workers as cores; `--no-pin` leaves them to the system).",
         ],
     )
     fig, axes = common.new_figure(1, 1, w=5.5, h=4.0)
@@ -247,7 +269,15 @@ if __name__ == "__main__":
     p.add_argument("--sorted-groups", dest="sorted_groups", type=int, default=None)
     p.add_argument("--name", default="sweep_scale")
     p.add_argument("--cpu", action="store_true", help="the CPU alone, beside a GPU")
+    p.add_argument(
+        "--no-pin",
+        dest="no_pin",
+        action="store_true",
+        help="leave the workers of both pools to the system's placement",
+    )
     a = p.parse_args()
+    if a.no_pin:
+        _distribute.PIN_WORKERS = False
     if a.cpu:
         jax.config.update("jax_platforms", "cpu")
     main(quick=a.quick, members=_ints(a.members), workers=_ints(a.workers),

@@ -133,6 +133,23 @@ _EXPORTED = {}  # (fn, structure, static parts, shapes) -> exported chunk progra
 _POOL = {"executor": None, "workers": 0}
 
 
+PIN_WORKERS = True
+"""A pool with one worker per core of this process (the default of `processes=
+"auto"`) runs each worker on a core of its own (`pinned_cores`)."""
+
+
+def pinned_cores(workers: int):
+    """The cores the workers of a pool of `workers` are bound to, one each: this
+    process's cores where there are as many workers as cores and `PIN_WORKERS`;
+    else None (the system places them). A worker then keeps its core and its
+    caches, and XLA's threads of one worker do not displace another: measured
+    in docs/performance.md, "Sweeps on every core and every GPU"."""
+    if not PIN_WORKERS or not hasattr(os, "sched_getaffinity"):
+        return None
+    cores = sorted(os.sched_getaffinity(0))
+    return cores if workers == len(cores) > 1 else None
+
+
 def process_pool(workers: int) -> cf.ProcessPoolExecutor:
     """jaxstring's own pool of `workers` spawned processes (kept for later sweeps;
     one fork of a process running JAX's threads could deadlock, hence spawn)."""
@@ -140,11 +157,14 @@ def process_pool(workers: int) -> cf.ProcessPoolExecutor:
         return _POOL["executor"]
     shutdown_pool()
     cache = jax.config.jax_compilation_cache_dir or None
+    context = multiprocessing.get_context("spawn")
+    cores = pinned_cores(workers)
+    started = context.Value("i", 0) if cores else None
     executor = cf.ProcessPoolExecutor(
         max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=context,
         initializer=_worker.init,
-        initargs=(cache,),
+        initargs=(cache, cores, started),
     )
     with _main_not_rerun():  # a worker process starts at a submit with none idle
         for _ in range(workers):

@@ -16,10 +16,17 @@ import pickle
 _COMPILED = {}  # program key -> compiled call, per worker process
 
 
-def init(cache_dir: str | None) -> None:
+def init(cache_dir: str | None, cores=None, started=None) -> None:
     """Set up a worker of jaxstring's own pool: float64, the CPU backend (a GPU
-    stays with the parent), the shared compilation cache, one OpenBLAS thread."""
+    stays with the parent), the shared compilation cache, one OpenBLAS thread.
+    With `cores` (a list) the n-th worker started (`started`, a shared counter)
+    runs on core `cores[n % len(cores)]` alone."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if cores and started is not None and hasattr(os, "sched_setaffinity"):
+        with started.get_lock():
+            n = started.value
+            started.value += 1
+        os.sched_setaffinity(0, {cores[n % len(cores)]})
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -30,9 +37,11 @@ def init(cache_dir: str | None) -> None:
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
-def ready() -> bool:
-    """Nothing: submitted once to start a pool's processes."""
-    return True
+def ready() -> tuple:
+    """This worker's process id and the cores it may run on: submitted once to
+    start a pool's processes."""
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    return os.getpid(), cores
 
 
 def run(key: str, program: bytes, leaves: list):

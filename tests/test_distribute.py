@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring import _distribute
+from jaxstring import _distribute, _worker
 
 from .helpers import KillingPool, run_distributed
 
@@ -277,3 +277,24 @@ def test_identification_over_two_distributed_processes_gives_the_one_process_fit
         assert abs(int(got["iterations"]) - int(one["iterations"])) <= 1
         np.testing.assert_allclose(got["losses"], one["losses"], rtol=1e-9)
         assert abs(float(got["alpha"]) - float(one["alpha"])) <= 1e-9
+
+
+@pytest.mark.skipif(_distribute.host_cores() < 2, reason="one core: nothing to bind")
+def test_a_pool_with_a_worker_per_core_binds_each_to_a_core_of_its_own():
+    cores = _distribute.host_cores()
+    pool = _distribute.process_pool(cores)
+    try:
+        seen = {}
+        for _ in range(50):  # until every worker has answered
+            for future in [pool.submit(_worker.ready) for _ in range(4 * cores)]:
+                pid, allowed = future.result(timeout=120)
+                seen[pid] = allowed
+            if len(seen) == cores:
+                break
+        assert len(seen) == cores
+        assert all(len(allowed) == 1 for allowed in seen.values())
+        assert sorted(a[0] for a in seen.values()) == _distribute.pinned_cores(cores)
+        # Fewer workers than cores: the system places them.
+        assert _distribute.pinned_cores(cores - 1) is None
+    finally:
+        _distribute.shutdown_pool()
