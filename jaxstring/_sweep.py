@@ -671,6 +671,9 @@ def sweep(
       a GPU host the GPUs), or the number of worker processes: the members go in
       chunks to jaxstring's own pool of spawned processes (kept for later sweeps),
       which run the program this process traced once (`jaxstring._distribute`).
+      A pool with one worker per core of this process binds each worker to a
+      core of its own (docs/performance.md, "Sweeps on every core and every
+      GPU").
     - `executor`: any `concurrent.futures.Executor` whose workers can import
       jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to run the
       chunks instead. A worker that dies loses no member: its chunks are run again
