@@ -617,9 +617,8 @@ def fit(
       experiment, traced once in this process and run in jaxstring's own pool of
       spawned processes (the pool of `sweep` and `least_squares`), and the
       optimiser's step is taken here.
-      In a `jax.distributed` job the experiments are split over the job's
-      processes (experiment i in process i mod N, in its workers if it has
-      any), and every process gathers all of them and takes the same steps.
+      In a `jax.distributed` job they are split over its processes, as
+      `least_squares` splits them, and every process takes the same steps.
     - `executor`: any `concurrent.futures.Executor` whose workers can import
       jaxstring (a `ProcessPoolExecutor`, a Dask cluster's executor) to evaluate
       the experiments instead. A worker that dies is replaced and its experiment
