@@ -4,15 +4,18 @@ bad settings are refused by name. Local processes only (127.0.0.1), bounded in
 time, cleaned up."""
 
 import concurrent.futures as cf
+import multiprocessing
+import os
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring import _distribute, _worker
+from jaxstring import _distribute
 
 from .helpers import KillingPool, run_distributed
 
@@ -282,18 +285,17 @@ def test_identification_over_two_distributed_processes_gives_the_one_process_fit
 @pytest.mark.skipif(_distribute.host_cores() < 2, reason="one core: nothing to bind")
 def test_a_pool_with_a_worker_per_core_binds_each_to_a_core_of_its_own():
     cores = _distribute.host_cores()
+    _distribute.shutdown_pool()
+    before = {p.pid for p in multiprocessing.active_children()}
     pool = _distribute.process_pool(cores)
     try:
-        seen = {}
-        for _ in range(50):  # until every worker has answered
-            for future in [pool.submit(_worker.ready) for _ in range(4 * cores)]:
-                pid, allowed = future.result(timeout=120)
-                seen[pid] = allowed
-            if len(seen) == cores:
-                break
-        assert len(seen) == cores
-        assert all(len(allowed) == 1 for allowed in seen.values())
-        assert sorted(a[0] for a in seen.values()) == _distribute.pinned_cores(cores)
+        # Every worker busy at once: the pool has started (and set up) all of them.
+        list(pool.map(time.sleep, [1.0] * cores, timeout=120))
+        workers = [p for p in multiprocessing.active_children() if p.pid not in before]
+        assert len(workers) == cores
+        bound = [sorted(os.sched_getaffinity(p.pid)) for p in workers]
+        assert all(len(b) == 1 for b in bound)
+        assert sorted(b[0] for b in bound) == _distribute.pinned_cores(cores)
         # Fewer workers than cores: the system places them.
         assert _distribute.pinned_cores(cores - 1) is None
     finally:
