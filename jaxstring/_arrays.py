@@ -1,7 +1,10 @@
-"""Array helpers every system shares: float64 conversion, parameter fields, dots."""
+"""Array helpers every system shares: float64 conversion, parameter fields, dots,
+and NumPy stand-ins for small operations on concrete arrays."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def f64(x):
@@ -18,3 +21,34 @@ def param(**kw):
 def dot(a, b):
     """Row-wise dot product over the last axis."""
     return jnp.sum(a * b, axis=-1)
+
+
+def on_host(x) -> bool:
+    """Whether `x` is a concrete array in the host's memory: a NumPy array or
+    number, or a JAX array on CPU devices only, fully addressable (not a tracer)."""
+    if isinstance(x, jax.core.Tracer):
+        return False
+    if isinstance(x, jax.Array):
+        return x.is_fully_addressable and all(d.platform == "cpu" for d in x.devices())
+    return True
+
+
+def host_op(op, *arrays):
+    """`op(xp, *arrays)` with `xp` NumPy, as a JAX array, where every array is on
+    the host (`on_host`); with `xp` `jax.numpy` on the arrays as they are
+    otherwise (tracers, arrays on an accelerator).
+
+    For the small steps around a compiled solve (slicing rows, padding save times,
+    comparing a status code): run eagerly by JAX, each distinct operation and
+    shape compiles a program of its own, tens of milliseconds in every new
+    process, which is most of a second call's time once the solve's own program
+    is cached. NumPy's results are the same."""
+    if not all(on_host(a) for a in arrays):
+        return op(jnp, *arrays)
+    out = op(np, *(np.asarray(a) for a in arrays))
+    # on the device of the first JAX array among the inputs (`jnp.asarray` would
+    # compile a small program of its own; `device_put` copies)
+    device = next(
+        (next(iter(a.devices())) for a in arrays if isinstance(a, jax.Array)), None
+    )
+    return jax.device_put(out, device)

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 
 from . import _programs
+from ._arrays import host_op
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
 from ._solve_config import SolveConfig
@@ -199,7 +200,9 @@ def _padded(ts):
     extra = padded_length(n) - n
     if extra == 0:
         return ts
-    return jnp.concatenate([ts, jnp.broadcast_to(ts[-1:], (extra,))])
+    return host_op(
+        lambda xp, ts: xp.concatenate([ts, xp.broadcast_to(ts[-1:], (extra,))]), ts
+    )
 
 
 def _first_rows(traj: Trajectory, n: int) -> Trajectory:
@@ -207,13 +210,13 @@ def _first_rows(traj: Trajectory, n: int) -> Trajectory:
     the same, as the padding repeats the last time."""
     if traj.ts.shape[0] == n:
         return traj
-    cut = lambda x: x[:n]
+    cut = lambda x: host_op(lambda xp, x: x[:n], x)
     return dataclasses.replace(
         traj,
         ts=cut(traj.ts),
         ys=cut(traj.ys),
         obs=jax.tree_util.tree_map(cut, traj.obs),
-        n_valid=jnp.minimum(traj.n_valid, n),
+        n_valid=host_op(lambda xp, v: xp.minimum(v, n), traj.n_valid),
     )
 
 

@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._arrays import host_op
 from ._solvers.registry import check_solver, is_adaptive
 from ._solvers.step_size import STEP_CONTROLS
 from ._validate import (
@@ -219,7 +220,8 @@ class SolveConfig(eqx.Module):
         """`ts`, or `n_save` equally spaced times over [t0, t1], float64."""
         if self.ts is not None:
             return self.ts
-        return jnp.linspace(t0, t1, self.n_save, dtype=jnp.float64)
+        n = self.n_save
+        return host_op(lambda xp, a, b: xp.linspace(a, b, n, dtype=xp.float64), t0, t1)
 
     def adjoint_for(self, derivative: str = "gradient"):
         """The diffrax adjoint of a solve whose derivative is a `"gradient"` of a

@@ -4,9 +4,11 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._solvers.diffrax_compat import result_message
+from ._arrays import host_op
+from ._solvers.diffrax_compat import result_code, result_message
 
 
 class Trajectory(eqx.Module):
@@ -47,7 +49,7 @@ class Trajectory(eqx.Module):
 
     @property
     def ok(self) -> bool:
-        return bool(self.result == dfx.RESULTS.successful)
+        return int(np.asarray(result_code(self.result))) == 0
 
     @property
     def status(self) -> str:
@@ -57,7 +59,7 @@ class Trajectory(eqx.Module):
     @property
     def end_mass(self) -> Float[Array, "T dim"]:
         """Position of the end mass (the last node), m."""
-        return self.obs["positions"][:, -1, :]
+        return host_op(lambda xp, p: p[:, -1, :], self.obs["positions"])
 
     @classmethod
     def from_solution(cls, ts, ys, result, stats, scene) -> "Trajectory":

@@ -38,7 +38,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .. import _programs
-from .._arrays import dot as _dot, param as _param
+from .._arrays import dot as _dot, host_op, param as _param
 from .._blas import single_blas_thread
 from .._environment import Environment
 from .._geometry import safe_norm
@@ -1708,7 +1708,9 @@ def equilibrium(
     solve_rows = jnp.asarray(solve_rows)
     if y0 is None:
         y0 = initial_shape(model, effects, env, t0)
-    x0 = jax.lax.stop_gradient(y0[:, :3])
+    x0 = host_op(lambda xp, y: y[:, :3], y0)
+    if isinstance(x0, jax.core.Tracer):
+        x0 = jax.lax.stop_gradient(x0)
     t0 = jnp.asarray(t0, jnp.float64)
     # a later process skips tracing the solve (`jaxstring._programs`)
     x, res, it, ftol = _programs.call_or_jit(
@@ -1717,10 +1719,10 @@ def equilibrium(
         *(x0, model, effects, env, t0, solve_rows, max_iter, tol),
     )
     if not isinstance(res, jax.core.Tracer):
-        if not bool(jnp.isfinite(res)) or float(res) > 1e3 * ftol:
+        if not np.isfinite(float(res)) or float(res) > 1e3 * float(ftol):
             raise ValueError(
                 f"the static equilibrium did not converge: residual {float(res):.3g} N "
                 f"after {int(it)} iterations (max_iter = {max_iter})."
             )
-    y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
+    y = host_op(lambda xp, x: xp.concatenate([x, xp.zeros_like(x)], axis=1), x)
     return y, {"residual": res, "iterations": it}

@@ -947,7 +947,7 @@ def deck_scene(
         line_ids=tuple(ln["id"] for ln in deck.lines),
         point_ids=tuple(p["id"] for p in deck.points),
         # bending is traced only for a deck that names some
-        EI=EI if bool(jnp.any(EI > 0)) else None,
+        EI=EI if bool(np.any(np.asarray(EI) > 0)) else None,
         rods=rods,
         bodies=bodies,
         body_motions=body_motions,

@@ -28,6 +28,7 @@ import numpy as np
 import optimistix as optx
 
 from .. import _programs
+from .._arrays import host_op
 from .._blas import single_blas_thread
 from .._scene import Scene
 from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
@@ -337,14 +338,17 @@ def find_equilibria_map(scenes, **options):
 
 def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     _check_method(method)
-    batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *scenes)
+    batch = jax.tree_util.tree_map(
+        lambda *a: host_op(lambda xp, *a: xp.stack(a), *a), *scenes
+    )
     # a later process skips tracing the solves (`jaxstring._programs`)
     out = _programs.call_or_jit(
         _equilibria_map_body,
         _equilibria_map,
         *(batch, n_grid, rtol, atol, max_steps, method),
     )
-    return [_collect(*(a[i] for a in out), taut_tension) for i in range(len(scenes))]
+    rows = lambda i: (host_op(lambda xp, a: a[i], a) for a in out)
+    return [_collect(*rows(i), taut_tension) for i in range(len(scenes))]
 
 
 def counts(equilibria):

@@ -11,6 +11,7 @@ import os
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._arrays import host_op
 from .._environment import Environment, UniformCurrent
 from .._jit import eager_jit
 from .._scene import Scene
@@ -48,7 +49,11 @@ def current_field(U_c=1.0, beta_c=math.pi) -> UniformCurrent:
     """The spec's steady uniform current: speed `U_c` (m/s) flowing toward
     `beta_c` (rad from north, clockwise; pi = flowing south), earth axes."""
     return UniformCurrent(
-        jnp.stack([U_c * jnp.cos(beta_c), U_c * jnp.sin(beta_c), jnp.zeros(())])
+        host_op(
+            lambda xp, u, b: xp.stack([u * xp.cos(b), u * xp.sin(b), xp.zeros(())]),
+            U_c,
+            beta_c,
+        )
     )
 
 

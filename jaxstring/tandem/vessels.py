@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._arrays import host_op
 from .._effect import AbstractEffect, AbstractLoad
 from .._environment import Environment
 from .._model import AbstractModel
@@ -78,7 +79,7 @@ def rot(psi):
 
 def wrap(a):
     """Angle wrapped to (-pi, pi]."""
-    return jnp.arctan2(jnp.sin(a), jnp.cos(a))
+    return host_op(lambda xp, a: xp.arctan2(xp.sin(a), xp.cos(a)), a)
 
 
 def cross2(a, b):
