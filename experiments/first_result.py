@@ -11,11 +11,19 @@ same process (the run alone) and the whole process's wall time.
 
 Run: ``python experiments/first_result.py [--quick] [--only NAME ...]``. Writes
 results/first_result.{md,csv}.
+
+With ``--ref COMMIT [--rounds N]`` the cases (default: the README's) run for this
+tree and for the commit (checked out into a temporary git worktree) in interleaved
+rounds, cold then warm for each, and results/first_result_ref.{md,csv} give the
+medians over the rounds side by side: what a change did to the first result, on
+one machine at one time.
 """
 
 import argparse
 import json
 import os
+import pathlib
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -160,6 +168,54 @@ def command(env, cache):
     return rows
 
 
+README_CASES = [name for name in CASES if name.startswith("readme_")]
+
+
+def compare(ref, rounds=3, only=None):
+    """This tree against `ref`: each case cold then warm, per code per round."""
+    names = only or README_CASES
+    root = pathlib.Path(HERE).parent
+    base = {k: v for k, v in os.environ.items() if k != "JAXSTRING_CACHE"}
+    got = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        refdir = pathlib.Path(tmp) / "ref"
+        subprocess.run(["git", "worktree", "add", "--detach", str(refdir), ref],
+                       cwd=root, check=True, capture_output=True)  # fmt: skip
+        try:
+            codes = {"this tree": root, f"ref {ref[:10]}": refdir}
+            for _ in range(rounds):
+                for name in names:
+                    for code, tree in codes.items():
+                        env = dict(base, PYTHONPATH=str(tree))
+                        with tempfile.TemporaryDirectory() as cache:
+                            for state in ("cold", "warm"):
+                                r = run_case(name, cache, env)
+                                print(name, code, state, r, flush=True)
+                                got.setdefault((name, state, code), []).append(r)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(refdir)],
+                           cwd=root, check=False, capture_output=True)  # fmt: skip
+    keys = ("first_call_s", "first_result_s", "second_call_s")
+    rows = [
+        {"case": name, "cache": state, "code": code}
+        | {k: statistics.median(r[k] for r in rs) for k in keys}
+        | {"rounds": len(rs)}
+        for (name, state, code), rs in got.items()
+    ]
+    common.write_table(
+        "first_result_ref",
+        rows,
+        ["case", "cache", "code", *keys, "rounds"],
+        f"Time to the first result: this tree against {ref[:10]}",
+        [
+            "Each value the median over interleaved rounds; each run a fresh "
+            "process, cold: an empty compilation cache, warm: the same folder "
+            "after the cold run. Columns as in first_result.md.",
+        ],
+    )
+    return rows
+
+
 def main(quick=False, only=None):
     common.set_quick(quick)
     env = {k: v for k, v in os.environ.items() if k != "JAXSTRING_CACHE"}
@@ -209,5 +265,10 @@ if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--only", nargs="*", default=None)
+    p.add_argument("--ref", default=None, help="a commit to compare against")
+    p.add_argument("--rounds", type=int, default=3)
     a = p.parse_args()
-    main(quick=a.quick, only=a.only)
+    if a.ref:
+        compare(a.ref, a.rounds, a.only)
+    else:
+        main(quick=a.quick, only=a.only)

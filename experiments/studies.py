@@ -711,7 +711,10 @@ STUDIES = (
             "jaxstring/_programs.py",
             "jaxstring/_config.py",
         ),
-        (Run((), _files("first_result")),),
+        (
+            Run((), _files("first_result")),
+            Run(("--ref", "b094d35", "--rounds", "2"), _files("first_result_ref")),
+        ),
     ),
     Study(
         "solve_defaults",
