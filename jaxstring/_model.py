@@ -31,6 +31,9 @@ class SolverStructure(eqx.Module):
       holding lines) and the other rows form a band of node width `bandwidth`
       (`second_order` then describes those rows): the Newton matrices are
       factorised by the band's Schur complement (`jaxstring._linalg`).
+    - `dense`: the Jacobian has no narrow band (every node couples to every other,
+      e.g. through tensions solved over the whole chain): the solvers take the
+      dense path without probing.
     """
 
     bandwidth: int | None = eqx.field(static=True, default=None)
@@ -39,6 +42,7 @@ class SolverStructure(eqx.Module):
     step_jacobians: bool = eqx.field(static=True, default=False)
     jacobian: bool = eqx.field(static=True, default=False)
     border: int = eqx.field(static=True, default=0)
+    dense: bool = eqx.field(static=True, default=False)
 
 
 class AbstractModel(eqx.Module):

@@ -209,12 +209,15 @@ def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
 
     `linear_solver`: "dense", "banded" (raises if no band is found) or "auto"
     (banded for large enough systems with a narrow band). The band is the one the
-    scene's model declares (`declared_width`), or else detected by probing
-    (`detect_width`: about 1.5-2 s of trace-time compilation per new relation).
+    scene's model declares (`declared_width`; none for a model that declares its
+    Jacobian dense), or else detected by probing (`detect_width`: one trace-time
+    compilation per new relation).
     """
     if linear_solver == "dense":
         return None
     scene = _declared_scene(fn, y, args)
+    if linear_solver == "auto" and scene is not None and scene.structure.dense:
+        return None
     border = 0 if scene is None else int(scene.structure.border)
     if border:
         return BorderedWidth(int(scene.structure.bandwidth), border)

@@ -54,7 +54,7 @@ from jaxtyping import Array, Float
 
 from .._arrays import dot as _dot, param as _param
 from .._jit import eager_jit
-from .._model import AbstractModel
+from .._model import AbstractModel, SolverStructure
 from .._validate import (
     check_int,
     check_nonnegative,
@@ -68,6 +68,7 @@ from ..chain import (
     Buoyancy,
     ChainKinematics,
     CoupledEnd,
+    Drag,
     EndKinematics,
     FixedEnd,
     FreeEnd,
@@ -194,6 +195,13 @@ class AbstractTether(AbstractModel):
 
     def __check_init__(self):
         _check_tether(self)
+
+    def structure(self, effects):
+        """Dense: the link tensions are solved over the whole chain at once
+        (ACEAM's axial model, the exact constraints), so every node's rate depends
+        on every other's state; the solvers skip probing for a band."""
+        del effects
+        return SolverStructure(dense=True)
 
     def _end_link_energy(self, ch):
         """Elastic energy of the proportional end links (stiffness `k`, N)."""
@@ -680,6 +688,13 @@ class LmsTether(AbstractTether):
 
     def _root_rigid(self):
         return False
+
+    def structure(self, effects):
+        """Band 1 under jaxstring's own chain effects (each link's spring and drag
+        act on its two nodes; None: detect, under any other load);
+        tests/solvers/test_fast_solvers.py checks it against detection."""
+        local = all(type(e) in (Gravity, Buoyancy, Drag) for e in effects)
+        return SolverStructure(bandwidth=1 if local else None)
 
     def _mask(self, ch):
         j = jnp.arange(self.N + 1)

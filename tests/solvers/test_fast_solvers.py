@@ -315,6 +315,22 @@ def test_declared_band_equals_the_detected_band(formulation, dim):
     assert _linalg.declared_width(vf, scene.y0[:, :2], scene) is None
 
 
+@pytest.mark.parametrize("method", ["lms", "aceam", "exact"])
+def test_tether_structure_is_what_probing_finds(method):
+    # The spring tether declares band 1; ACEAM's and the exact tensions are solved
+    # over the whole chain, so those declare a dense Jacobian: implicit solves of a
+    # tether skip the probe. The declarations must be what probing finds, with
+    # drag in a current and a moving winch.
+    scene = js.tether.tether_winch(method=method, N=11, t1=1.0)
+    vf = lambda y, s: s.vector_field(0.3, y)
+    detected = _linalg.detect_width(vf, scene.y0, scene)
+    if method == "lms":
+        assert _linalg.declared_width(vf, scene.y0, scene) == 1 == detected
+    else:
+        assert scene.structure.dense and detected is None
+        assert _linalg.choose_structure(vf, scene.y0, scene) is None
+
+
 class ZeroLoad(AbstractStringLoad):
     """A load jaxstring's string does not know (and that adds nothing): the model
     then gives no Jacobian of its own and the solvers probe with JVPs."""
