@@ -150,24 +150,34 @@ def detect_width(fn, y, args=None, max_width: int = 4):
             key = (str(jax.make_jaxpr(call)(y0, a_dyn)), W)
             if key in _WIDTH_CACHE:
                 return _WIDTH_CACHE[key]
-            probe = jax.jit(lambda u, a, v: _band_probe(call, W, u, a, v))
-            used = np.zeros(2 * W + 1, bool)
-            width = None
-            for seed in (0, 1):
-                ys = _surrogate(y, 10 + seed)
-                aa = eqx.filter(_surrogate(args, 20 + seed), eqx.is_array)
-                v = np.random.default_rng(30 + seed).standard_normal((n, b))
-                u, err, finite = probe(ys, aa, jnp.asarray(v, dtype=y.dtype))
-                if isinstance(err, jax.core.Tracer):
-                    return None
-                if not bool(finite) or float(err) > 1e-8:
-                    break
-                used |= np.asarray(u)
-            else:
-                offs = np.nonzero(used)[0] - W
-                width = max(int(np.max(np.abs(offs))) if offs.size else 0, 1)
-            _WIDTH_CACHE[key] = width
-            return width
+            inputs = [
+                (
+                    _surrogate(y, 10 + seed),
+                    eqx.filter(_surrogate(args, 20 + seed), eqx.is_array),
+                    jnp.asarray(
+                        np.random.default_rng(30 + seed).standard_normal((n, b)),
+                        y.dtype,
+                    ),
+                )
+                for seed in (0, 1)
+            ]
+        # Compiled ahead of time and called as a compiled program: traced under
+        # compile-time evaluation, each step on the probe's constant index arrays
+        # would run (and compile) eagerly, one small program each.
+        probe = jax.jit(lambda u, a, v: _band_probe(call, W, u, a, v))
+        compiled = probe.lower(*inputs[0]).compile()
+        used = np.zeros(2 * W + 1, bool)
+        width = None
+        for ys, aa, v in inputs:
+            u, err, finite = compiled(ys, aa, v)
+            if not bool(finite) or float(err) > 1e-8:
+                break
+            used |= np.asarray(u)
+        else:
+            offs = np.nonzero(used)[0] - W
+            width = max(int(np.max(np.abs(offs))) if offs.size else 0, 1)
+        _WIDTH_CACHE[key] = width
+        return width
     except Exception:  # noqa: BLE001  (a surrogate we cannot evaluate: go dense)
         return None
 

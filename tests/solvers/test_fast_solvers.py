@@ -297,7 +297,7 @@ def test_identity_factor_of_the_explicit_stage(structure):
 )
 def test_declared_band_equals_the_detected_band(formulation, dim):
     # The string models declare their Jacobian's node bandwidth, so that implicit
-    # solvers skip the trace-time probe (1.5-2 s of compilation per relation):
+    # solvers skip the trace-time probe (a compilation per relation):
     # the declaration must be what probing finds, with every string effect on.
     from jaxstring._scene import scene_vector_field
 
