@@ -45,6 +45,7 @@ from harness import (  # noqa: F401  (re-exported: the experiments' one writer)
     fmt,
     is_quick,
     new_figure,
+    ref_worktree,
     results_dir,
     results_file,
     savefig,

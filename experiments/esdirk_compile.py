@@ -20,7 +20,6 @@ import pathlib
 import statistics
 import subprocess
 import sys
-import tempfile
 
 import _common as common
 
@@ -75,22 +74,15 @@ def main(ref, rounds=3, quick=False):
     k = 10 if quick else 40
     programs = list(PROGRAMS)[:1] if quick else list(PROGRAMS)
     rounds = 1 if quick else rounds
-    with tempfile.TemporaryDirectory() as tmp:
-        refdir = pathlib.Path(tmp) / "ref"
-        subprocess.run(["git", "worktree", "add", "--detach", str(refdir), ref],
-                       cwd=ROOT, check=True, capture_output=True)  # fmt: skip
-        try:
-            codes = {"this tree": ROOT, f"ref {ref[:10]}": refdir}
-            got = {(p, c): [] for p in programs for c in codes}
-            for _ in range(rounds):
-                for prog in programs:
-                    for code, root in codes.items():
-                        r = _child(root, *PROGRAMS[prog], k)
-                        print(prog, code, r, flush=True)
-                        got[prog, code].append(r)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(refdir)],
-                           cwd=ROOT, check=False, capture_output=True)  # fmt: skip
+    with common.ref_worktree(ref) as refdir:
+        codes = {"this tree": ROOT, f"ref {ref[:10]}": refdir}
+        got = {(p, c): [] for p in programs for c in codes}
+        for _ in range(rounds):
+            for prog in programs:
+                for code, root in codes.items():
+                    r = _child(root, *PROGRAMS[prog], k)
+                    print(prog, code, r, flush=True)
+                    got[prog, code].append(r)
     rows = []
     for (prog, code), rs in got.items():
         med = lambda key: statistics.median(r[key] for r in rs)  # noqa: E731

@@ -177,24 +177,17 @@ def compare(ref, rounds=3, only=None):
     root = pathlib.Path(HERE).parent
     base = {k: v for k, v in os.environ.items() if k != "JAXSTRING_CACHE"}
     got = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        refdir = pathlib.Path(tmp) / "ref"
-        subprocess.run(["git", "worktree", "add", "--detach", str(refdir), ref],
-                       cwd=root, check=True, capture_output=True)  # fmt: skip
-        try:
-            codes = {"this tree": root, f"ref {ref[:10]}": refdir}
-            for _ in range(rounds):
-                for name in names:
-                    for code, tree in codes.items():
-                        env = dict(base, PYTHONPATH=str(tree))
-                        with tempfile.TemporaryDirectory() as cache:
-                            for state in ("cold", "warm"):
-                                r = run_case(name, cache, env)
-                                print(name, code, state, r, flush=True)
-                                got.setdefault((name, state, code), []).append(r)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(refdir)],
-                           cwd=root, check=False, capture_output=True)  # fmt: skip
+    with common.ref_worktree(ref) as refdir:
+        codes = {"this tree": root, f"ref {ref[:10]}": refdir}
+        for _ in range(rounds):
+            for name in names:
+                for code, tree in codes.items():
+                    env = dict(base, PYTHONPATH=str(tree))
+                    with tempfile.TemporaryDirectory() as cache:
+                        for state in ("cold", "warm"):
+                            r = run_case(name, cache, env)
+                            print(name, code, state, r, flush=True)
+                            got.setdefault((name, state, code), []).append(r)
     keys = ("first_call_s", "first_result_s", "second_call_s")
     rows = [
         {"case": name, "cache": state, "code": code}

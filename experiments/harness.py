@@ -208,6 +208,26 @@ def write_text(filename: str, text: str):
 
 
 @contextlib.contextmanager
+def ref_worktree(ref: str):
+    """The repository at commit `ref`, checked out into a temporary git worktree
+    (its path), removed on exit: the code a change is measured against."""
+    import subprocess
+    import tempfile
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "ref"
+        git = lambda *args, check: subprocess.run(  # noqa: E731
+            ["git", "worktree", *args], cwd=root, check=check, capture_output=True
+        )
+        git("add", "--detach", str(path), ref, check=True)
+        try:
+            yield path
+        finally:
+            git("remove", "--force", str(path), check=False)
+
+
+@contextlib.contextmanager
 def results_file(filename: str):
     """Open results/`filename` for writing text (a hand-built table); it is
     stamped when closed (`stamp_file`)."""
