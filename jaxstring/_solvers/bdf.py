@@ -95,6 +95,7 @@ import numpy as np
 
 from .. import _linalg
 from .._jit import traced_once
+from .newton import chord as newton_chord
 
 
 MAX_ORDER = 5
@@ -382,40 +383,17 @@ class BDF(dfx.AbstractAdaptiveSolver):
 
         def newton(fn, d0, lu, c_lu):
             corr = 2.0 / (1.0 + c / c_lu)  # CVODE's chord scaling for c != c_lu
-
-            def cond(carry):
-                k, _, _, conv, fail = carry
-                return (k < NEWTON_MAXITER) & ~conv & ~fail
-
-            def body(carry):
-                k, d, norm_old, _, _ = carry
-                r = fn(d)
-                finite = jnp.all(jnp.isfinite(r))
-                dy = corr * lu.solve(jnp.where(finite, r, 0.0))
-                dy_norm = _rms(dy / scale)
-                rate = dy_norm / norm_old
-                first = k == 0
-                diverge = ~first & (
-                    (rate >= 1)
-                    | (rate ** (NEWTON_MAXITER - k) / (1 - rate) * dy_norm > newton_tol)
-                )
-                fail = ~finite | diverge | ~jnp.isfinite(dy_norm)
-                d = jnp.where(fail, d, d + dy)
-                conv = ~fail & (
-                    (dy_norm == 0)
-                    | (~first & (rate / (1 - rate) * dy_norm < newton_tol))
-                )
-                return k + 1, d, dy_norm, conv, fail
-
-            init = (
-                jnp.array(0, jnp.int32),
+            # scipy's prediction counts the current update as one still to come:
+            # a horizon of NEWTON_MAXITER + 1 updates.
+            return newton_chord(
+                fn,
+                lambda r: -corr * lu.solve(r),
                 d0,
-                jnp.array(jnp.inf, dtype),
-                jnp.array(False),
-                jnp.array(False),
+                lambda d, dd, d_new: _rms(dd / scale),
+                newton_tol,
+                NEWTON_MAXITER,
+                horizon=NEWTON_MAXITER + 1,
             )
-            k, d, _, conv, _ = lax.while_loop(cond, body, init)
-            return d, conv, k
 
         def with_aux(d, aux_tree):
             # custom_root gives its aux output tangents of the aux dtype, which

@@ -58,6 +58,7 @@ import numpy as np
 from .. import _linalg
 from .._jit import traced_once
 from .fixed_step import OneStepODESolver, _rms
+from .newton import chord as newton_chord
 from .rosenbrock import _VF
 
 
@@ -203,40 +204,28 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
 
     def _newton(self, fn, f_init, z, hg, fac):
         """Simplified Newton on one stage with the factorisation `fac`: returns
-        (f, converged)."""
+        (f, converged). An update is measured by its effect on the stage value
+        z + hg f; a negligible first update is accepted at once."""
         dtype = f_init.dtype
         rtol = jnp.asarray(self.rtol, dtype)
         atol = jnp.asarray(self.atol, dtype)
-        kappa, max_iters = self.kappa, self.max_iters
+        kappa = self.kappa
 
-        # status: 0 iterating, 1 converged, 2 failed (diverged or not finite)
-        def cond(c):
-            return (c[0] < max_iters) & (c[3] == 0)
+        def size_of(f, d, f_new):
+            return _rms(hg * d / (atol + rtol * jnp.abs(z + hg * f_new)))
 
-        def body(c):
-            it, f, prev, _ = c
-            d = fac.solve(fn(f))
-            f_new = f - d
-            size = _rms(hg * d / (atol + rtol * jnp.abs(z + hg * f_new)))
-            finite = jnp.isfinite(size)
-            first = it == 0
-            theta = size / prev
-            remaining = jnp.maximum(max_iters - it - 1, 0)
-            diverge = ~first & (
-                (theta >= 1) | (theta**remaining / (1 - theta) * size > kappa)
-            )
-            conv = (size <= 1e-10) | jnp.where(
-                first, size <= 1e-3 * kappa, theta / (1 - theta) * size <= kappa
-            )
-            status = jnp.where(~finite | diverge, 2, jnp.where(conv, 1, 0)).astype(
-                jnp.int32
-            )
-            return it + 1, jnp.where(finite, f_new, f), size, status
-
-        zero = jnp.array(0, jnp.int32)
-        init = (zero, f_init, jnp.array(jnp.inf, dtype), zero)
-        _, f, _, status = lax.while_loop(cond, body, init)
-        return f, status == 1
+        f, conv, _ = newton_chord(
+            fn,
+            fac.solve,
+            f_init,
+            size_of,
+            kappa,
+            self.max_iters,
+            horizon=self.max_iters,
+            first_tol=1e-3 * kappa,
+            tiny=1e-10,
+        )
+        return f, conv
 
     def _stage(self, terms, args, ti, z, hg, f_init, fac, width, second_order):
         """One attempt at an implicit stage: the simplified Newton iteration from

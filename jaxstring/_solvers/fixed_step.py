@@ -40,6 +40,7 @@ import jax.numpy as jnp
 
 from .. import _linalg
 from .._jit import traced_once
+from .newton import chord as newton_chord
 
 
 NEWTON_KINDS = ("chord", "full")
@@ -96,36 +97,6 @@ class _NewmarkResidual(eqx.Module):
         return a1 - f1[..., m:]
 
 
-def _chord(fn, fac, r0, x0, scaled, kappa, max_iters):
-    """Simplified Newton x <- x - J0^{-1} r(x) with the factorisation `fac` of the
-    Jacobian at x0 (`r0` = r(x0)). Converged when the estimated distance to the
-    solution, theta / (1 - theta) |dx| with the observed contraction rate theta =
-    |dx_i| / |dx_{i-1}| (Hairer & Wanner IV.8), is below `kappa`; given up when
-    theta >= 1 (not contracting), after `max_iters` updates, or on a non-finite
-    update. Returns (x, converged)."""
-
-    def body(c):
-        x, r, i, prev, _, _ = c
-        dx = fac.solve(r)
-        size = scaled(x, x - dx)
-        x = x - dx
-        theta = jnp.where(i > 0, size / prev, 0.0)
-        done = (size == 0.0) | (
-            (i > 0) & (theta < 1.0) & (theta * size <= kappa * (1.0 - theta))
-        )
-        fail = ~jnp.isfinite(size) | ((i > 0) & (theta >= 1.0))
-        return x, fn(x), i + 1, size, done, fail
-
-    def cond(c):
-        _, _, i, _, done, fail = c
-        return ~done & ~fail & (i < max_iters)
-
-    dtype = jnp.result_type(x0)
-    init = (x0, r0, 0, jnp.array(1e300, dtype), False, False)
-    x, _, _, _, done, _ = lax.while_loop(cond, body, init)
-    return x, done
-
-
 def _newton(
     residual,
     x0,
@@ -143,7 +114,7 @@ def _newton(
     """Damped full Newton for residual(x, a) = 0 from x0. Returns (x, converged).
 
     With `chord_iters` > 0, first up to that many simplified Newton (chord) updates
-    with the one factorisation of the Jacobian at x0 (`_chord`, as stiff codes do:
+    with the one factorisation of the Jacobian at x0 (`newton.chord`, as stiff codes do:
     one factorisation per step instead of one per iteration); if they do not
     converge, the damped full Newton below restarts from x0. Either way the result
     is the step's implicit equation solved to the same test, so `newton="chord"`
@@ -230,9 +201,18 @@ def _newton(
     dtype = jnp.result_type(x0)
     big = jnp.array(1e300, dtype)
     if chord_iters > 0:
-        r0, lin0 = jax.linearize(fn, x0)
+        # Simplified Newton with the one factorisation at x0 (no prediction of
+        # the remaining iterations: the full Newton below takes over instead).
+        _, lin0 = jax.linearize(fn, x0)
         fac0 = _linalg.factor(_linalg.jacobian(fn, x0, width, lin0))
-        x_c, ok_c = _chord(fn, fac0, r0, x0, scaled, kappa, chord_iters)
+        x_c, ok_c, _ = newton_chord(
+            fn,
+            fac0.solve,
+            x0,
+            lambda x, dx, x_new: scaled(x, x_new),
+            kappa,
+            chord_iters,
+        )
         # Converged: the Newton loop below does not run (size 0 <= kappa).
         start = (jnp.where(ok_c, x_c, x0), 0, jnp.where(ok_c, 0.0, big))
     else:

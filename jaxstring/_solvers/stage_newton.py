@@ -62,6 +62,7 @@ from jaxtyping import PyTree, Scalar
 from .. import _linalg
 from .._scene import Scene
 from .diffrax_compat import stage_arguments
+from .newton import contraction_test
 
 
 class _NoAux(eqx.Module):
@@ -220,12 +221,12 @@ class StageNewton(optx.AbstractRootFinder):
     refresh_when_hopeless: bool = eqx.field(static=True, default=True)
     first_jacobian_in_step: bool = eqx.field(static=True, default=False)
 
-    def _too_slow(self, rate, size, done):
-        """Hairer's prediction: contracting at `rate` (< 1) from an update of scaled
-        `size` after `done` iterations, the iteration cannot get below `kappa`
-        within `max_iters`."""
-        remaining = jnp.maximum(self.max_iters - done, 0)
-        return (rate < 1) & (rate**remaining / (1 - rate) * size > self.kappa)
+    def _test(self, size, prev, it):
+        """Hairer & Wanner's test (`newton.contraction_test`) after update `it`
+        (0-based): (converged, too slow, rate)."""
+        return contraction_test(
+            size, prev, it, self.kappa, self.max_iters, 1e-3 * self.kappa, 1e-10
+        )
 
     def _factor(self, fn, y, args, shape_only=False):
         """The factorised Jacobian of `fn(., args)` at `y`. With `shape_only` (for
@@ -311,17 +312,13 @@ class StageNewton(optx.AbstractRootFinder):
             diffsize = self.norm(scaled)
         diffsize = jnp.asarray(diffsize, dtype=state.diffsize.dtype)
         n_jac = state.n_jac + jnp.where(fresh, 1, 0)
-        rate = diffsize / state.diffsize
+        _, too_slow, rate = self._test(diffsize, state.diffsize, state.step)
         slow = (state.step >= 1) & ~(rate <= self.refresh_rate)
         # Also refresh (rather than give up) when the contraction, though below
         # `refresh_rate`, is predicted too slow to converge within `max_iters`:
         # with a stale Jacobian on a very stiff string (EA = 1e9) this prediction,
         # not a rate >= 1, is what fails most steps.
-        hopeless = (
-            (state.step >= 1)
-            & self._too_slow(rate, diffsize, state.step + 1)
-            & self.refresh_when_hopeless
-        )
+        hopeless = too_slow & (rate < 1) & self.refresh_when_hopeless
         refresh_next = (slow | hopeless) & (n_jac < self.max_jacobians) & self.refresh
         new_state = _StageState(
             linear_state=fac,
@@ -344,22 +341,13 @@ class StageNewton(optx.AbstractRootFinder):
         del fn, y, args, options, tags
         size = state.diffsize
         finite = jnp.isfinite(size)
-        rate = size / state.diffsize_prev
+        # (first update: no rate estimate yet; only a negligible one converges)
+        converged, slow, rate = self._test(size, state.diffsize_prev, state.step - 1)
         have_rate = state.step >= 2
-        # First iteration: no rate estimate yet; accept only a negligible update.
-        first_ok = (state.step == 1) & (size <= 1e-3 * self.kappa)
-        tiny = size <= 1e-10
-        contracting = have_rate & (rate < 1)
-        eta = rate / (1 - rate)
-        converged = first_ok | tiny | (contracting & (eta * size <= self.kappa))
-        hopeless = (
-            have_rate & self._too_slow(rate, size, state.step) & (not self.newton)
-        )
         if self.newton:
             diverged = ~finite | (have_rate & (rate >= 1) & (state.step >= 4))
         else:
             # A refresh scheduled for the next iteration gets its chance first.
-            slow = (have_rate & (rate >= 1)) | hopeless
             diverged = ~finite | (slow & ~state.refresh_next)
         started = state.step >= 1
         converged = converged & started
