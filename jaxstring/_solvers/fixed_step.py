@@ -114,8 +114,8 @@ def _newton(
     """Damped full Newton for residual(x, a) = 0 from x0. Returns (x, converged).
 
     With `chord_iters` > 0, first up to that many simplified Newton (chord) updates
-    with the one factorisation of the Jacobian at x0 (`newton.chord`, as stiff codes do:
-    one factorisation per step instead of one per iteration); if they do not
+    with the one factorisation of the Jacobian at x0 (`newton.chord`, as stiff
+    codes do: one factorisation per step instead of one per iteration); if they do not
     converge, the damped full Newton below restarts from x0. Either way the result
     is the step's implicit equation solved to the same test, so `newton="chord"`
     and `"full"` agree to within the Newton tolerance.
