@@ -629,7 +629,7 @@ STUDIES = (
             # On a GPU machine: its GPU, then its CPU cores alone.
             Run(
                 tuple(
-                    "--members 1024,8192,65536 --peer-members 1024 "
+                    "--members 1024,65536 --peer-members 1024 "
                     "--one-call-from 65536 --name sweep_scale_gpu".split()
                 ),
                 _files("sweep_scale_gpu", ext=("md", "csv", "png")),
@@ -644,6 +644,22 @@ STUDIES = (
                 gpu=True,
             ),
         ),
+    ),
+    Study(
+        "sweep_profile",
+        "sweep_profile.py",
+        "where a sweep step's time goes: kernels by part of the BDF step",
+        "20 s; GPU run: 1 min",
+        (*PENDULUM, "jaxstring/_sweep.py"),
+        (
+            Run((), _files("sweep_profile", "sweep_profile_kernels")),
+            Run(
+                ("--members", "16384", "--t1", "0.5"),
+                _files("sweep_profile_gpu", "sweep_profile_gpu_kernels"),
+                gpu=True,
+            ),
+        ),
+        quick=(),
     ),
     Study(
         "sweep_distributed",

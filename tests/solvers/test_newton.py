@@ -9,6 +9,7 @@ import numpy as np
 
 from jaxstring._solvers.newton import chord, contraction_test
 
+
 ROOT = 0.7390851332151607  # x = cos x (the Dottie number)
 
 

@@ -1,0 +1,237 @@
+"""Where a sweep's step spends its time: the compiled kernels, by part of the BDF step.
+
+Question: a vmapped adaptive sweep on a saturated device runs at a fixed number of
+members per second; which parts of a step take that time -- the vector field, the
+Jacobian, the factorisation, the linear solves, the rest of the Newton iteration, or
+the step control and diffrax's loop -- and how many kernels does a step launch?
+Case: the default pendulum (displacement variables, k = 40, EA = 1e6 N, alpha in
+[0.005, 0.05] s) as one `sweep` group of `--members` members (default: 65,536 on a
+GPU, 64 on a CPU) over the first `--t1` seconds, BDF at rtol = atol = 1e-6 (the
+sweep's defaults). The first call compiles (not profiled); a second call of the same
+program runs under `jax.profiler`.
+
+Each kernel of the trace (a fusion of the compiled program, named by its `hlo_op`)
+is attributed to the innermost named part of the step from the `op_name` metadata of
+that operation in the optimised program (an XLA dump of this process): the
+`vector_field` and `jacobian` scopes, the jitted `factor` and `block_solve`, the
+`newton` scope (the chord iteration's own arithmetic), and the rest (step-size
+and order control, diffrax's loop, saving). Times are per loop iteration of the
+group (the accepted and rejected steps of its slowest member).
+
+Run: ``python experiments/sweep_profile.py [--members M] [--t1 T] [--name N]``.
+Writes results/<name>.{md,csv} (by part) and results/<name>_kernels.{md,csv} (the
+kernels that take the most time); <name> is sweep_profile, or sweep_profile_gpu
+on a GPU.
+"""
+
+import os
+import re
+import tempfile
+
+
+_DUMP = tempfile.mkdtemp(prefix="jaxstring_hlo_")
+# One process's optimised programs, for the kernels' source names; the programs
+# must be compiled here (not read from a compilation cache) for the dump.
+os.environ["XLA_FLAGS"] = (
+    os.environ.get("XLA_FLAGS", "")
+    + f" --xla_dump_to={_DUMP} --xla_dump_hlo_as_text --xla_dump_hlo_pass_re=^$"
+    # On a GPU, one kernel per trace event (no CUDA graphs of several kernels).
+    + " --xla_gpu_enable_command_buffer="
+).strip()
+os.environ["JAXSTRING_CACHE"] = "off"
+
+import argparse  # noqa: E402
+import collections  # noqa: E402
+import glob  # noqa: E402
+
+import _common as common  # noqa: E402
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxstring as js  # noqa: E402
+
+
+K, EA = 40, 1e6
+RANGE = (0.005, 0.05)
+PARTS = (
+    "Jacobian",
+    "factorisation",
+    "linear solves",
+    "vector field",
+    "Newton (rest)",
+    "step control and loop",
+)
+
+
+def part_of(op_name: str) -> str:
+    """The part of the BDF step an operation belongs to, from its source name."""
+    if "jacobian" in op_name:
+        return "Jacobian"
+    if "jit(factor)" in op_name:
+        return "factorisation"
+    if "jit(block_solve)" in op_name or "solve" in op_name.split("/")[-1]:
+        return "linear solves"
+    if "vector_field" in op_name:
+        return "vector field"
+    if "newton" in op_name:
+        return "Newton (rest)"
+    return "step control and loop"
+
+
+_INSTR = re.compile(r'^\s*(?:ROOT\s+)?%?([\w.\-]+) = .*?op_name="([^"]*)"')
+_CONTROL = re.compile(r"\s(while|conditional|call)\(")
+
+
+def source_names(dump_dir: str) -> dict:
+    """hlo op name -> op_name metadata, from the largest optimised program that
+    holds a diffrax solve (the sweep's)."""
+    files = sorted(
+        glob.glob(os.path.join(dump_dir, "*after_optimizations.txt")),
+        key=os.path.getsize,
+        reverse=True,
+    )
+    for f in files:
+        text = open(f).read()
+        if "diffeqsolve" not in text:
+            continue
+        names = {}
+        for line in text.splitlines():
+            m = _INSTR.match(line)
+            # Control flow (while, conditional, call) holds other kernels: not
+            # counted itself.
+            if m and not _CONTROL.search(line.split(" = ", 1)[1]):
+                names.setdefault(m.group(1), m.group(2))
+        return names
+    return {}
+
+
+def kernel_times(trace_dir: str, names: dict) -> dict:
+    """hlo op name -> [launches, total ns] of the sweep program's kernels in the
+    trace: a GPU's "XLA Ops" line, or XLA:CPU's threads."""
+    path = sorted(glob.glob(f"{trace_dir}/**/*.xplane.pb", recursive=True))[-1]
+    data = jax.profiler.ProfileData.from_file(path)
+    out = collections.defaultdict(lambda: [0, 0.0])
+    gpu = [p for p in data.planes if p.name.startswith("/device:GPU")]
+    planes = gpu[:1] or [p for p in data.planes if p.name == "/host:CPU"]
+    for plane in planes:
+        lines = list(plane.lines)
+        ops = [ln for ln in lines if ln.name == "XLA Ops"]
+        for line in ops or lines:
+            for ev in line.events:
+                stats = dict(ev.stats)  # noqa: PLW2901
+                op = stats.get("hlo_op", ev.name if gpu else None)
+                if op is None or op not in names:
+                    continue
+                out[op][0] += 1
+                out[op][1] += ev.duration_ns
+    return out
+
+
+def main(members=None, t1=0.05, name=None, keep=None):
+    gpu = jax.default_backend() != "cpu"
+    members = members or (65536 if gpu else 64)
+    name = name or ("sweep_profile_gpu" if gpu else "sweep_profile")
+    scene = js.string_pendulum(k=K, EA=EA, t1=t1)
+    alphas = np.linspace(*RANGE, members)
+
+    def end_mass(traj, scene):
+        del scene
+        return traj.end_mass
+
+    def call():
+        return js.sweep(
+            scene,
+            {"alpha": alphas},
+            end_mass,
+            ts=np.array([0.0, t1]),
+            processes=1,
+            batch_size=members,
+        )
+
+    first = call()
+    trace_dir = tempfile.mkdtemp(prefix="jaxstring_trace_")
+    with jax.profiler.trace(trace_dir):
+        res = call()
+    iters = int(np.asarray(res.stats["num_steps"]).max())  # accepted + rejected
+    if keep:  # the raw trace and programs, for a closer look elsewhere
+        import shutil
+
+        os.makedirs(keep, exist_ok=True)
+        for f in glob.glob(f"{trace_dir}/**/*.xplane.pb", recursive=True):
+            shutil.copy(f, keep)
+        dumps = glob.glob(os.path.join(_DUMP, "*after_optimizations.txt"))
+        for f in sorted(dumps, key=os.path.getsize)[-2:]:
+            shutil.copy(f, keep)
+    names = source_names(_DUMP)
+    kernels = kernel_times(trace_dir, names)
+    total = sum(v[1] for v in kernels.values())
+    by_part = collections.defaultdict(lambda: [0, 0.0])
+    for op, (n, ns) in kernels.items():
+        p = part_of(names[op])
+        by_part[p][0] += n
+        by_part[p][1] += ns
+    device = jax.devices()[0]
+    where = f"{device.platform} ({device.device_kind})" if gpu else "CPU, one process"
+    rows = [
+        dict(
+            part=p,
+            kernels_per_step=by_part[p][0] / iters,
+            ms_per_step=by_part[p][1] / iters / 1e6,
+            share=by_part[p][1] / total if total else float("nan"),
+        )
+        for p in PARTS
+    ]
+    rows.append(
+        dict(
+            part="all kernels",
+            kernels_per_step=sum(v[0] for v in kernels.values()) / iters,
+            ms_per_step=total / iters / 1e6,
+            share=1.0,
+        )
+    )
+    wall = res.time / iters * 1e3
+    common.write_table(
+        name,
+        rows,
+        ["part", "kernels_per_step", "ms_per_step", "share"],
+        f"Where a sweep step's time goes: {members} members as one group on {where} "
+        f"(pendulum k = {K}, EA = {EA:g} N, BDF at 1e-6, first {t1:g} s)",
+        [
+            f"{iters} loop iterations (the slowest member's accepted and rejected "
+            f"steps); the profiled call took {res.time:.3g} s, {wall:.3g} ms per "
+            f"iteration (kernel time plus launches and the loop's own "
+            f"synchronisation); first call {first.time:.3g} s, compilation included.",
+            "Each kernel is attributed to the innermost named part of the step that "
+            "holds its operation (`part_of`): kernels_per_step are launches per "
+            "iteration, ms_per_step their summed duration per iteration.",
+        ],
+    )
+    top = sorted(kernels.items(), key=lambda kv: -kv[1][1])[:20]
+    common.write_table(
+        f"{name}_kernels",
+        [
+            dict(
+                kernel=op,
+                part=part_of(names[op]),
+                launches_per_step=n / iters,
+                us_per_launch=ns / n / 1e3,
+                share=ns / total,
+                source=names[op].split("diffeqsolve))")[-1][-90:],
+            )
+            for op, (n, ns) in top
+        ],
+        ["kernel", "part", "launches_per_step", "us_per_launch", "share", "source"],
+        f"The 20 kernels that take the most time, {members} members on {where}",
+        ["source: the end of the operation's op_name in the optimised program."],
+    )
+    return rows
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--members", type=int, default=None)
+    p.add_argument("--t1", type=float, default=0.05)
+    p.add_argument("--name", default=None)
+    p.add_argument("--keep", default=None, help="copy the trace and programs here")
+    a = p.parse_args()
+    main(members=a.members, t1=a.t1, name=a.name, keep=a.keep)
