@@ -143,12 +143,14 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
             )
 
 
+# The members and settings of `_sweep`, from a script with no main guard.
 _UNGUARDED = """
 import sys
 import numpy as np
 import jaxstring as js
 res = js.sweep(js.string_pendulum(k=4, t1=0.2), {"alpha": np.linspace(0.005, 0.05, 8)},
-               solver="bdf", n_save=5, batch_size=2, processes=2)
+               solver="implicit_euler_fixed", dt0=0.01, n_save=5, batch_size=2,
+               processes=2)
 np.savez(sys.argv[1], result=res.result, **res.out)
 """
 
