@@ -10,6 +10,11 @@ GPU, 64 on a CPU) over the first `--t1` seconds, BDF at rtol = atol = 1e-6 (the
 sweep's defaults). The first call compiles (not profiled); a second call of the same
 program runs under `jax.profiler`.
 
+On a CPU every kernel's trace event costs time of its own, so the traced call runs
+several times longer than the untraced one (both are reported) and the parts made
+of many small kernels weigh more in it; the kernel counts are exact. On a GPU the
+kernels are timed on the device.
+
 Each kernel of the trace (a fusion of the compiled program, named by its `hlo_op`)
 is attributed to the innermost named part of the step from the `op_name` metadata of
 that operation in the optimised program (an XLA dump of this process): the
@@ -43,6 +48,7 @@ os.environ["JAXSTRING_CACHE"] = "off"
 import argparse  # noqa: E402
 import collections  # noqa: E402
 import glob  # noqa: E402
+import time  # noqa: E402
 
 import _common as common  # noqa: E402
 import jax  # noqa: E402
@@ -127,6 +133,34 @@ def kernel_times(trace_dir: str, names: dict) -> dict:
     return out
 
 
+def linear_algebra_ms(members: int, n: int = K, repeats: int = 20) -> float:
+    """Milliseconds for the factorisation and three solves of `members` block-
+    tridiagonal Newton matrices of n 2 x 2 blocks (the reduced matrices of the
+    string's step; `block_factor` and `block_solve`, jitted apart), best of
+    `repeats` after a first call."""
+    from jaxstring._linalg import banded
+
+    rng = np.random.default_rng(0)
+    lo, up = (0.1 * rng.normal(size=(members, n, 2, 2)) for _ in range(2))
+    diag = 0.1 * rng.normal(size=(members, n, 2, 2)) + 4 * np.eye(2)
+    rhs = rng.normal(size=(members, n, 2))
+
+    def one(lo, diag, up, f):
+        fac = banded.block_factor(banded.BlockTridiagonal(lo, diag, up, n, 2, 1))
+        for _ in range(3):
+            f = banded.block_solve(fac, f)
+        return f
+
+    fn = jax.jit(jax.vmap(one))
+    fn(lo, diag, up, rhs).block_until_ready()
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn(lo, diag, up, rhs).block_until_ready()
+        best = min(best, time.perf_counter() - t)
+    return best * 1e3
+
+
 def main(members=None, t1=0.05, name=None, keep=None):
     gpu = jax.default_backend() != "cpu"
     members = members or (65536 if gpu else 64)
@@ -149,6 +183,7 @@ def main(members=None, t1=0.05, name=None, keep=None):
         )
 
     first = call()
+    plain = call()  # the same call untraced: what tracing itself costs
     trace_dir = tempfile.mkdtemp(prefix="jaxstring_trace_")
     with jax.profiler.trace(trace_dir):
         res = call()
@@ -190,6 +225,8 @@ def main(members=None, t1=0.05, name=None, keep=None):
         )
     )
     wall = res.time / iters * 1e3
+    wall_plain = plain.time / iters * 1e3
+    la_ms = linear_algebra_ms(members)
     common.write_table(
         name,
         rows,
@@ -200,10 +237,15 @@ def main(members=None, t1=0.05, name=None, keep=None):
             f"{iters} loop iterations (the slowest member's accepted and rejected "
             f"steps); the profiled call took {res.time:.3g} s, {wall:.3g} ms per "
             f"iteration (kernel time plus launches and the loop's own "
-            f"synchronisation); first call {first.time:.3g} s, compilation included.",
+            f"synchronisation), the same call untraced {plain.time:.3g} s, "
+            f"{wall_plain:.3g} ms per iteration; first call {first.time:.3g} s, "
+            "compilation included.",
             "Each kernel is attributed to the innermost named part of the step that "
             "holds its operation (`part_of`): kernels_per_step are launches per "
             "iteration, ms_per_step their summed duration per iteration.",
+            f"Timed apart: the factorisation and three solves of {members} "
+            f"block-tridiagonal matrices of {K} 2 x 2 blocks take {la_ms:.3g} ms "
+            "(`linear_algebra_ms`).",
         ],
     )
     top = sorted(kernels.items(), key=lambda kv: -kv[1][1])[:20]
