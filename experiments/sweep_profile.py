@@ -18,8 +18,10 @@ kernels are timed on the device.
 Each kernel of the trace (a fusion of the compiled program, named by its `hlo_op`)
 is attributed to the innermost named part of the step from the `op_name` metadata of
 that operation in the optimised program (an XLA dump of this process): the
-`vector_field` and `jacobian` scopes, the jitted `factor` and `block_solve`, the
-`newton` scope (the chord iteration's own arithmetic), and the rest (step-size
+`vector_field`, `jacobian` and `newton` scopes that this script puts around the
+vector field, the BDF step's Jacobian and its chord iteration (`name_the_parts`;
+jaxstring itself carries no such scopes: they lengthened the compilation of a
+sweep by a fifth), the jitted `factor` and `block_solve`, and the rest (step-size
 and order control, diffrax's loop, saving). Times are per loop iteration of the
 group (the accepted and rejected steps of its slowest member).
 
@@ -67,6 +69,25 @@ PARTS = (
     "Newton (rest)",
     "step control and loop",
 )
+
+
+def _scoped(fn, name):
+    def wrapper(*args, **kwargs):
+        with jax.named_scope(name):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def name_the_parts():
+    """Put named scopes around the vector field, the BDF step's Jacobian and its
+    Newton iteration, for the source names of their operations (before tracing)."""
+    from jaxstring import _scene
+    from jaxstring._solvers import bdf
+
+    _scene._traced_vector_field = _scoped(_scene._traced_vector_field, "vector_field")
+    bdf.BDF._jacobian = _scoped(bdf.BDF._jacobian, "jacobian")
+    bdf.newton_chord = _scoped(bdf.newton_chord, "newton")
 
 
 def part_of(op_name: str) -> str:
@@ -162,6 +183,7 @@ def linear_algebra_ms(members: int, n: int = K, repeats: int = 20) -> float:
 
 
 def main(members=None, t1=0.05, name=None, keep=None):
+    name_the_parts()
     gpu = jax.default_backend() != "cpu"
     members = members or (65536 if gpu else 64)
     name = name or ("sweep_profile_gpu" if gpu else "sweep_profile")

@@ -155,10 +155,8 @@ def scene_vector_field(t, y, scene: Scene):
 def _traced_vector_field(t, y, scene):
     # Jitted (and inlined where it is called) so that its trace is kept: a solve
     # calls the vector field from many places (stages, Jacobians, the solver's
-    # start) with arguments of one structure, and traces it once. The named scope
-    # labels its operations in profiles and compiled programs.
-    with jax.named_scope("vector_field"):
-        return scene.vector_field(t, y)
+    # start) with arguments of one structure, and traces it once.
+    return scene.vector_field(t, y)
 
 
 def _time_array(t):

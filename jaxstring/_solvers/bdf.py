@@ -378,24 +378,22 @@ class BDF(dfx.AbstractAdaptiveSolver):
             return c * terms.vf(t1, y_pred + d, args) - psi - d
 
         def fresh_factor():
-            with jax.named_scope("jacobian"):
-                jac = self._jacobian(terms, t1, y_pred, args, width)
+            jac = self._jacobian(terms, t1, y_pred, args, width)
             return _linalg.factor(jac.scale_shift(1.0, -c))
 
         def newton(fn, d0, lu, c_lu):
             corr = 2.0 / (1.0 + c / c_lu)  # CVODE's chord scaling for c != c_lu
             # scipy's prediction counts the current update as one still to come:
             # a horizon of NEWTON_MAXITER + 1 updates.
-            with jax.named_scope("newton"):
-                return newton_chord(
-                    fn,
-                    lambda r: -corr * lu.solve(r),
-                    d0,
-                    lambda d, dd, d_new: _rms(dd / scale),
-                    newton_tol,
-                    NEWTON_MAXITER,
-                    horizon=NEWTON_MAXITER + 1,
-                )
+            return newton_chord(
+                fn,
+                lambda r: -corr * lu.solve(r),
+                d0,
+                lambda d, dd, d_new: _rms(dd / scale),
+                newton_tol,
+                NEWTON_MAXITER,
+                horizon=NEWTON_MAXITER + 1,
+            )
 
         def with_aux(d, aux_tree):
             # custom_root gives its aux output tangents of the aux dtype, which
