@@ -143,14 +143,15 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
             )
 
 
-# The members and settings of `_sweep`, from a script with no main guard.
-_UNGUARDED = """
+# The members and settings of `_sweep` (`SOLVE` written in), from a script with no
+# main guard.
+_UNGUARDED = f"""
 import sys
 import numpy as np
 import jaxstring as js
-res = js.sweep(js.string_pendulum(k=4, t1=0.2), {"alpha": np.linspace(0.005, 0.05, 8)},
-               solver="implicit_euler_fixed", dt0=0.01, n_save=5, batch_size=2,
-               processes=2)
+alphas = np.linspace(0.005, 0.05, 8)
+res = js.sweep(js.string_pendulum(k=4, t1=0.2), {{"alpha": alphas}},
+               n_save=5, batch_size=2, processes=2, **{SOLVE!r})
 np.savez(sys.argv[1], result=res.result, **res.out)
 """
 
