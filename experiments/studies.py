@@ -688,6 +688,15 @@ STUDIES = (
         (Run((), _files("compile_options")),),
     ),
     Study(
+        "cpu_loops",
+        "cpu_loops.py",
+        "XLA:CPU's small-while-loop threshold against solve and compile time",
+        "8 min",
+        (*PENDULUM, "jaxstring/lines", "jaxstring/_sweep.py", "jaxstring/_config.py"),
+        (Run((), _files("cpu_loops")),),
+        quick=(),
+    ),
+    Study(
         "esdirk_compile",
         "esdirk_compile.py",
         "compile and run time of the written-out Kvaerno against another commit's",

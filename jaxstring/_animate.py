@@ -27,14 +27,16 @@ def frame_indices(ts, n_valid: int, frames: int) -> np.ndarray:
 
 def save_figure(fig, path, title: str = "", dpi: int = 110, tight: bool = True):
     """Give `fig` its title, write it to `path` and close it; returns the path."""
-    import matplotlib.pyplot as plt
+    import sys
 
     if title:
         fig.suptitle(title, fontsize=10)
     if tight:
         fig.tight_layout()
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    plt = sys.modules.get("matplotlib.pyplot")  # a bare Figure needs no closing
+    if plt is not None:
+        plt.close(fig)
     return path
 
 

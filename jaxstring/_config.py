@@ -15,14 +15,42 @@
 * The ``jaxstring`` command (and only it) runs with equinox's ``EQX_ON_ERROR=nan``
   unless the variable is set: a failed runtime check of diffrax, lineax or
   optimistix then yields NaN data, which the solve's status reports.
+* jaxstring's own processes (the ``jaxstring`` command and the worker processes
+  of its sweep and identification pools), and only they, raise XLA:CPU's
+  small-while-loop threshold (`whole_loop_flags`) unless ``XLA_FLAGS`` already
+  sets XLA's backend options: a user's process keeps XLA's defaults.
 """
 
 import os
 import sys
 
 
+WHOLE_LOOP_BYTES = 1 << 20
+"""XLA:CPU compiles a while loop whose buffers take fewer bytes than this as one
+kernel (``xla_cpu_small_while_loop_byte_threshold``; XLA's own default is 1 kB),
+instead of dispatching its body's kernels one by one on every iteration. The
+solve loop of a small adaptive solve (the default pendulum) then runs as one
+kernel; loops with more state keep XLA's default treatment (a larger value made
+other programs compile several times longer). Measured in docs/performance.md,
+"Whole-loop kernels on the CPU"."""
+
+
+def whole_loop_flags(flags: str | None) -> str:
+    """The ``XLA_FLAGS`` value `flags` with XLA:CPU's small-while-loop threshold
+    raised to `WHOLE_LOOP_BYTES`, or `flags` unchanged where it already sets
+    XLA's backend options (the user's choice stands). Only takes effect in a
+    process that has not started XLA yet; process-wide, so jaxstring applies it
+    only to processes of its own."""
+    flags = flags or ""
+    if "xla_backend_extra_options" in flags:
+        return flags
+    option = f"xla_cpu_small_while_loop_byte_threshold={WHOLE_LOOP_BYTES}"
+    return f"{flags} --xla_backend_extra_options={option}".strip()
+
+
 if os.path.basename(sys.argv[0]) == "jaxstring":  # the console command
     os.environ.setdefault("EQX_ON_ERROR", "nan")
+    os.environ["XLA_FLAGS"] = whole_loop_flags(os.environ.get("XLA_FLAGS"))
 
 import jax  # noqa: E402
 

@@ -18,10 +18,15 @@ _COMPILED = {}  # program key -> compiled call, per worker process
 
 def init(cache_dir: str | None, cores=None, started=None) -> None:
     """Set up a worker of jaxstring's own pool: float64, the CPU backend (a GPU
-    stays with the parent), the shared compilation cache, one OpenBLAS thread.
+    stays with the parent), the shared compilation cache, one OpenBLAS thread,
+    whole-loop kernels (`jaxstring._config.whole_loop_flags`).
     With `cores` (a list) the n-th worker started (`started`, a shared counter)
     runs on core `cores[n % len(cores)]` alone."""
+    from ._config import whole_loop_flags
+
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    # before this process compiles anything: XLA reads its flags once
+    os.environ["XLA_FLAGS"] = whole_loop_flags(os.environ.get("XLA_FLAGS"))
     if cores and started is not None and hasattr(os, "sched_setaffinity"):
         with started.get_lock():
             n = started.value

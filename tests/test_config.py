@@ -18,7 +18,7 @@ import pytest
 pytest.importorskip("threadpoolctl")
 
 _PROBE = r"""
-import json, sys
+import json, os, sys
 order = sys.argv[1]
 if order == "jaxstring_first":
     import jaxstring as js
@@ -41,7 +41,8 @@ scene = js.pendulum.string_pendulum(k=3, t1=0.05)
 traj = js.simulate(scene, n_save=3)
 after = blas()
 print(json.dumps({"before": before, "inside": seen, "after": after,
-                  "ok": bool(traj.ok), "dtype": str(jnp.asarray(1.0).dtype)}))
+                  "ok": bool(traj.ok), "dtype": str(jnp.asarray(1.0).dtype),
+                  "xla_flags": os.environ.get("XLA_FLAGS")}))
 """
 
 
@@ -73,6 +74,22 @@ def test_user_blas_threads_unchanged_outside_jaxstring_calls(order):
     assert r["after"] and max(r["after"]) == cores
     # Inside jaxstring's calls every BLAS pool runs one thread.
     assert r["inside"] and max(r["inside"]) == 1
+    # XLA's flags are the user's: the whole-loop threshold is for jaxstring's own
+    # processes (the command, its worker pools) only.
+    assert r["xla_flags"] == os.environ.get("XLA_FLAGS")
+
+
+def test_whole_loop_threshold_leaves_the_users_backend_options():
+    from jaxstring._config import WHOLE_LOOP_BYTES, whole_loop_flags
+
+    mine = "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=0"
+    assert whole_loop_flags(mine) == mine
+    raised = whole_loop_flags("--xla_cpu_enable_fast_math=false")
+    assert raised.split() == [
+        "--xla_cpu_enable_fast_math=false",
+        "--xla_backend_extra_options="
+        f"xla_cpu_small_while_loop_byte_threshold={WHOLE_LOOP_BYTES}",
+    ]
 
 
 def test_user_setting_is_respected():

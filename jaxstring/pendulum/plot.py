@@ -4,7 +4,6 @@ Not imported by the core modules, and it leaves matplotlib's backend as the user
 it (the `jaxstring` command selects the file-only Agg backend itself).
 """
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 from .._animate import canvas, frame_indices, save_figure, write_gif
@@ -44,6 +43,8 @@ def snapshots(traj, ax=None, every: float = 0.1):
     Returns the axes.
     """
     if ax is None:
+        import matplotlib.pyplot as plt
+
         _, ax = plt.subplots(figsize=(6, 6))
     n = _valid_rows(traj)
     pos = np.asarray(traj.positions)
@@ -99,8 +100,16 @@ def summary_figure(traj, path, title: str = ""):
 
     Returns `path`.
     """
-    fig = plt.figure(figsize=(12, 6), layout="constrained")
-    grid = fig.add_gridspec(2, 2, width_ratios=(1.25, 1.0))
+    # A bare Figure (not pyplot's): no backend or figure manager to set up, and
+    # nothing for pyplot to keep open after the file is written.
+    from matplotlib.figure import Figure
+
+    # Fixed margins: a constrained layout draws the figure once more to place it.
+    fig = Figure(figsize=(12, 6))
+    grid = fig.add_gridspec(
+        2, 2, width_ratios=(1.25, 1.0), left=0.06, right=0.98, bottom=0.08,
+        top=0.86, wspace=0.18, hspace=0.12,
+    )  # fmt: skip
     ax_s = fig.add_subplot(grid[:, 0])
     ax_t = fig.add_subplot(grid[0, 1])
     ax_e = fig.add_subplot(grid[1, 1], sharex=ax_t)
