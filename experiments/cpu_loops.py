@@ -13,7 +13,8 @@ results change?
 The threshold can only be set process-wide (`XLA_FLAGS`, read once when the
 process starts XLA; per-compilation options cannot carry it), so each row runs
 in a fresh process without compilation cache. Cases: the default string
-pendulum (`js.string_pendulum()`, BDF), the natural-variables pendulum with
+pendulum (`js.string_pendulum()`, BDF), the same with Kvaerno5 (the
+`jaxstring run string-pendulum` solve), the natural-variables pendulum with
 Kvaerno5 and the angle form with Rodas5P (k = 40), a sweep of 32 dampings of the
 default pendulum in one vmapped group (`processes=1`), and MoorDyn's WD0050 deck
 with the ZZP1_A1 motion (read before timing). Times: first call (trace and
@@ -36,28 +37,20 @@ COLUMNS = (
 
 # case -> code run in the child: defines `build()` (untimed) and `call(x)` (timed),
 # which returns the result to compare and the number of accepted steps.
+PENDULUM_CASE = """
+def build():
+    return js.string_pendulum(formulation=%r)
+def call(scene):
+    tr = js.simulate(scene, **%r)
+    return tr.end_mass, tr.stats["num_accepted_steps"]
+"""
+
 CASES = {
-    "default pendulum (BDF)": """
-def build():
-    return js.string_pendulum()
-def call(scene):
-    tr = js.simulate(scene)
-    return tr.end_mass, tr.stats["num_accepted_steps"]
-""",
-    "natural pendulum (Kvaerno5)": """
-def build():
-    return js.string_pendulum(formulation="natural")
-def call(scene):
-    tr = js.simulate(scene, solver="kvaerno5")
-    return tr.end_mass, tr.stats["num_accepted_steps"]
-""",
-    "angle pendulum (Rodas5P)": """
-def build():
-    return js.string_pendulum(formulation="angle")
-def call(scene):
-    tr = js.simulate(scene, solver="rodas5p")
-    return tr.end_mass, tr.stats["num_accepted_steps"]
-""",
+    "default pendulum (BDF)": PENDULUM_CASE % ("displacement", {}),
+    "displacement pendulum (Kvaerno5)": PENDULUM_CASE
+    % ("displacement", {"solver": "kvaerno5"}),
+    "natural pendulum (Kvaerno5)": PENDULUM_CASE % ("natural", {"solver": "kvaerno5"}),
+    "angle pendulum (Rodas5P)": PENDULUM_CASE % ("angle", {"solver": "rodas5p"}),
     "sweep of 32 dampings (one group)": """
 def build():
     return js.string_pendulum()
