@@ -13,8 +13,9 @@ results change?
 The threshold can only be set process-wide (`XLA_FLAGS`, read once when the
 process starts XLA; per-compilation options cannot carry it), so each row runs
 in a fresh process without compilation cache. Cases: the default string
-pendulum (`js.string_pendulum()`, BDF), the same with Kvaerno5 (the
-`jaxstring run string-pendulum` solve), the natural-variables pendulum with
+pendulum (`js.string_pendulum()`) with `simulate`'s defaults (Kvaerno5, the
+solve of `jaxstring run string-pendulum`) and with BDF, the natural-variables
+pendulum with
 Kvaerno5 and the angle form with Rodas5P (k = 40), a sweep of 32 dampings of the
 default pendulum in one vmapped group (`processes=1`), and MoorDyn's WD0050 deck
 with the ZZP1_A1 motion (read before timing). Times: first call (trace and
@@ -46,9 +47,8 @@ def call(scene):
 """
 
 CASES = {
-    "default pendulum (BDF)": PENDULUM_CASE % ("displacement", {}),
-    "displacement pendulum (Kvaerno5)": PENDULUM_CASE
-    % ("displacement", {"solver": "kvaerno5"}),
+    "default pendulum (Kvaerno5)": PENDULUM_CASE % ("displacement", {}),
+    "default pendulum (BDF)": PENDULUM_CASE % ("displacement", {"solver": "bdf"}),
     "natural pendulum (Kvaerno5)": PENDULUM_CASE % ("natural", {"solver": "kvaerno5"}),
     "angle pendulum (Rodas5P)": PENDULUM_CASE % ("angle", {"solver": "rodas5p"}),
     "sweep of 32 dampings (one group)": """
