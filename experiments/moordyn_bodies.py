@@ -37,8 +37,10 @@ compilation cache) apart, the run best of 3 after compilation. Equal agreement:
 jaxstring's loosest tolerance at which it is as close to the analytic solution
 (or to its own run at the tests' tolerance) as MoorDyn is, and its time then.
 
-Run: ``python experiments/moordyn_bodies.py [--quick]`` (quick: one repeat,
-without BodiesAndRods and RodPinnedFloating). Writes
+Run: ``python experiments/moordyn_bodies.py [--quick] [--whole-loops]`` (quick:
+one repeat, without BodiesAndRods and RodPinnedFloating; ``--whole-loops``:
+jaxstring with XLA:CPU's whole-loop kernels, as the ``jaxstring`` command runs
+it, docs/performance.md, written to ``moordyn_bodies_whole_loops``). Writes
 ``results/moordyn_bodies.{md,csv}`` and the figures
 ``results/moordyn_bodies_{orbit,pinned,beams}.png`` (a full run copies them to
 docs/img/).
@@ -58,6 +60,7 @@ import numpy as np
 
 import jaxstring as js
 from jaxstring import lines
+from jaxstring._config import whole_loop_flags
 
 
 G = 9.80665
@@ -781,8 +784,12 @@ def figures(series, tag, docs):
 # ---------------------------------------------------------------------------
 
 
-def main(quick=False, repeats=None):
-    """Run every case; return the rows."""
+def main(quick=False, repeats=None, whole_loops=False):
+    """Run every case; return the rows. `whole_loops`: jaxstring's solves with
+    XLA:CPU's whole-loop kernels (as in the `jaxstring` command; set here, before
+    this process first runs XLA), written to moordyn_bodies_whole_loops."""
+    if whole_loops:
+        os.environ["XLA_FLAGS"] = whole_loop_flags(os.environ.get("XLA_FLAGS"))
     common.set_quick(quick)
     js.disable_compilation_cache()  # the first call of each case compiles
     repeats = repeats or (1 if quick else 3)
@@ -819,7 +826,7 @@ def main(quick=False, repeats=None):
             print({k: v for k, v in row.items()}, flush=True)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    tag = "_quick" if quick else ""
+    tag = ("_whole_loops" if whole_loops else "") + ("_quick" if quick else "")
     columns = (
         "case quantity test_limit moordyn jaxstring analytic diff diff_of md_err "
         "js_err md_dtM md_s js_code js_ok js_steps js_setup_s js_compile_s js_run_s "
@@ -830,7 +837,8 @@ def main(quick=False, repeats=None):
         f"moordyn_bodies{tag}",
         rows,
         columns,
-        "MoorDyn's body, rod and beam test cases: MoorDyn vs jaxstring",
+        "MoorDyn's body, rod and beam test cases: MoorDyn vs jaxstring"
+        + (" (whole-loop kernels)" if whole_loops else ""),
         notes=[
             "quantity: what MoorDyn's test checks (or, where it only checks that the "
             "case runs, the state it ends in); moordyn, jaxstring: its value in each "
@@ -863,9 +871,17 @@ def main(quick=False, repeats=None):
             "row was measured (the machine has 2 cores and is shared).",
         ],
     )
-    figures(series, tag, docs=not quick)
+    if not whole_loops:
+        figures(series, tag, docs=not quick)
     return rows
 
 
 if __name__ == "__main__":
-    common.run_study(main)
+    common.run_study(
+        main,
+        whole_loops=dict(
+            flag="whole-loops",
+            action="store_true",
+            help="jaxstring with XLA:CPU's whole-loop kernels (the command's setting)",
+        ),
+    )

@@ -455,6 +455,7 @@ STUDIES = (
                     ),
                 ),
             ),
+            Run(("--whole-loops",), _files("moordyn_bodies_whole_loops")),
         ),
     ),
     Study(
