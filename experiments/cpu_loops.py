@@ -21,11 +21,11 @@ default pendulum in one vmapped group (`processes=1`), and MoorDyn's WD0050 deck
 with the ZZP1_A1 motion (read before timing). Times: first call (trace and
 compile included) and the best of three calls after it.
 
-Run: ``python experiments/cpu_loops.py [--thresholds 1k,1M,8M] [--cases ...]``.
+Run: ``python experiments/cpu_loops.py [--quick] [--thresholds default,1M,8M]
+[--cases NAME,...]``.
 Writes results/cpu_loops.{md,csv}.
 """
 
-import argparse
 import json
 
 import _common as common
@@ -96,12 +96,18 @@ def _bytes(text: str) -> int:
     return int(float(text.rstrip("kmg")) * scale)
 
 
-def main(thresholds=("default", "1M", "8M"), cases=None):
+def main(quick=False, thresholds=None, cases=None):
+    """Each case at each threshold (default: 1 kB, 1 MB, 8 MB; quick: the default
+    pendulum at 1 kB and 1 MB); return the rows."""
     import os
     import tempfile
 
     import numpy as np
 
+    common.set_quick(quick)
+    if quick:
+        thresholds, cases = thresholds or ("default", "1M"), cases or list(CASES)[:1]
+    thresholds = thresholds or ("default", "1M", "8M")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases or list(CASES):
@@ -148,11 +154,4 @@ def main(thresholds=("default", "1M", "8M"), cases=None):
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--thresholds", default="default,1M,8M")
-    p.add_argument("--cases", default=None, help="comma-separated case names")
-    a = p.parse_args()
-    main(
-        thresholds=a.thresholds.split(","),
-        cases=a.cases.split(",") if a.cases else None,
-    )
+    common.run_study(main, lists={"thresholds": str, "cases": str})

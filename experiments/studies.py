@@ -692,10 +692,9 @@ STUDIES = (
         "cpu_loops",
         "cpu_loops.py",
         "XLA:CPU's small-while-loop threshold against solve and compile time",
-        "8 min",
+        "30 s / 10 min",
         (*PENDULUM, "jaxstring/lines", "jaxstring/_sweep.py", "jaxstring/_config.py"),
         (Run((), _files("cpu_loops")),),
-        quick=(),
     ),
     Study(
         "esdirk_compile",
