@@ -5,6 +5,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+
+# Annotations of zero-dimensional arrays (a parameter, a residual, a flag).
+FloatScalar = Float[Array, ""]
+BoolScalar = Bool[Array, ""]
+IntScalar = Int[Array, ""]
 
 
 def f64(x):

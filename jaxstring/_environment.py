@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._arrays import FloatScalar
 from ._validate import (
     check_fields,
     check_finite,
@@ -147,10 +148,10 @@ class Environment(eqx.Module):
     - `wind`: the air velocity field at the surface, or None for no wind.
     """
 
-    g: Float[Array, ""] = eqx.field(converter=_f64, default=G)
-    rho_water: Float[Array, ""] = eqx.field(converter=_f64, default=RHO_SEA_WATER)
-    rho_air: Float[Array, ""] = eqx.field(converter=_f64, default=1.225)
-    nu_water: Float[Array, ""] = eqx.field(converter=_f64, default=1.0e-6)
+    g: FloatScalar = eqx.field(converter=_f64, default=G)
+    rho_water: FloatScalar = eqx.field(converter=_f64, default=RHO_SEA_WATER)
+    rho_air: FloatScalar = eqx.field(converter=_f64, default=1.225)
+    nu_water: FloatScalar = eqx.field(converter=_f64, default=1.0e-6)
     current: AbstractFlow | None = None
     wind: AbstractFlow | None = None
 

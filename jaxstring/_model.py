@@ -1,16 +1,18 @@
 """The interface every jaxstring model implements (strings, tethers, vessels)."""
 
 import abc
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
 from jaxtyping import Array
 
 
-class SolverStructure(eqx.Module):
+@dataclasses.dataclass(frozen=True)
+class SolverStructure:
     """What a model tells the implicit solvers about its vector field.
 
-    **Fields** (all structure, none traced):
+    **Fields** (all structure, none traced: plain Python values):
 
     - `bandwidth`: w when the state is node-major `(n, b)` and node i couples only
       to nodes i - w ... i + w; None: the solvers detect the band by probing (one
@@ -36,13 +38,13 @@ class SolverStructure(eqx.Module):
       dense path without probing.
     """
 
-    bandwidth: int | None = eqx.field(static=True, default=None)
-    second_order: int = eqx.field(static=True, default=0)
-    stage_jacobians: bool = eqx.field(static=True, default=False)
-    step_jacobians: bool = eqx.field(static=True, default=False)
-    jacobian: bool = eqx.field(static=True, default=False)
-    border: int = eqx.field(static=True, default=0)
-    dense: bool = eqx.field(static=True, default=False)
+    bandwidth: int | None = None
+    second_order: int = 0
+    stage_jacobians: bool = False
+    step_jacobians: bool = False
+    jacobian: bool = False
+    border: int = 0
+    dense: bool = False
 
 
 class AbstractModel(eqx.Module):

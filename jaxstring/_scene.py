@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._arrays import FloatScalar
 from ._effect import AbstractEffect
 from ._environment import Environment
 from ._jit import eager_jit
@@ -51,8 +52,8 @@ class Scene(eqx.Module):
     model: AbstractModel
     effects: tuple[AbstractEffect, ...]
     y0: Float[Array, "..."] = eqx.field(converter=_state)
-    t1: Float[Array, ""] = eqx.field(converter=_time)
-    t0: Float[Array, ""] = eqx.field(converter=_time, default=0.0)
+    t1: FloatScalar = eqx.field(converter=_time)
+    t0: FloatScalar = eqx.field(converter=_time, default=0.0)
     name: str = eqx.field(static=True, default="scene")
     env: Environment = eqx.field(default_factory=Environment)
 

@@ -5,9 +5,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Float
 
-from ._arrays import host_op
+from ._arrays import FloatScalar, IntScalar, host_op
 from ._solvers.diffrax_compat import result_code, result_message
 
 
@@ -37,8 +37,8 @@ class Trajectory(eqx.Module):
     obs: dict
     result: dfx.RESULTS
     stats: dict
-    t_end: Float[Array, ""]
-    n_valid: Int[Array, ""]
+    t_end: FloatScalar
+    n_valid: IntScalar
 
     def __getattr__(self, name):
         # Observables by attribute: traj.positions, traj.tension, ...

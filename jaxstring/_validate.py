@@ -117,6 +117,43 @@ def check_choice(name: str, value, choices) -> None:
         )
 
 
+def options_of(func, where: str, options: dict, skip: int = 1) -> dict:
+    """The keyword options of `func` (its parameters after the first `skip`) with
+    their defaults, replaced by `options`: for a function that takes the same
+    options as `func` and hands them on. Raises ValueError naming an unknown
+    option and the valid ones."""
+    import inspect
+
+    params = list(inspect.signature(func).parameters.values())[skip:]
+    valid = {q.name: q.default for q in params}
+    unknown = sorted(set(options) - set(valid))
+    if unknown:
+        raise ValueError(
+            f"`{where}`: unknown option(s) {unknown}; valid: {sorted(valid)}."
+        )
+    return {**valid, **options}
+
+
+def same_signature(func, like, skip: int = 1):
+    """Give `func` (whose parameters are its own first ones, then `**options`)
+    the signature of its own parameters followed by those of `like` after the
+    first `skip`, so that help() and editors show the options `func` hands on to
+    `like`; returns `func`."""
+    import inspect
+
+    own = [
+        q
+        for q in inspect.signature(func).parameters.values()
+        if q.kind not in (q.VAR_POSITIONAL, q.VAR_KEYWORD)
+    ]
+    sig = inspect.signature(like)
+    params = own + list(sig.parameters.values())[skip:]
+    func.__signature__ = sig.replace(
+        parameters=params, return_annotation=inspect.signature(func).return_annotation
+    )
+    return func
+
+
 def check_angle(name: str, value) -> None:
     if not is_concrete(value):
         return

@@ -17,9 +17,8 @@ here and the string pendulum (whose vertical is y).
 import equinox as eqx
 import jax.numpy as jnp
 import jax.tree_util as jtu
-from jaxtyping import Array, Float
 
-from .._arrays import f64
+from .._arrays import FloatScalar, f64
 from .._effect import AbstractLoad
 from .._geometry import safe_norm
 from .._validate import check_choice, check_nonnegative, check_shape
@@ -96,10 +95,10 @@ class Drag(AbstractChainLoad):
     and then no current operation is traced); rho is `Environment.rho_water`.
     """
 
-    Cd: Float[Array, ""] | None = eqx.field(converter=_none_or_f64, default=None)
-    CdAx: Float[Array, ""] | None = eqx.field(converter=_none_or_f64, default=None)
-    Cl: Float[Array, ""] | None = eqx.field(converter=_none_or_f64, default=None)
-    scale: Float[Array, ""] = eqx.field(converter=f64, default=1.0)
+    Cd: FloatScalar | None = eqx.field(converter=_none_or_f64, default=None)
+    CdAx: FloatScalar | None = eqx.field(converter=_none_or_f64, default=None)
+    Cl: FloatScalar | None = eqx.field(converter=_none_or_f64, default=None)
+    scale: FloatScalar = eqx.field(converter=f64, default=1.0)
     axial_area: str = eqx.field(static=True, default="surface")
 
     def __check_init__(self):

@@ -36,23 +36,18 @@ def add_parser(scene_parsers, common_arguments, cache_arguments) -> None:
         help="ramp the motion table in from rest over its first RAMP seconds "
         "(`jaxstring.lines.ramp_in`), s",
     )
-    p.add_argument(
-        "--axial-drag",
-        dest="axial_drag",
-        choices=("surface", "diameter"),
-        default="surface",
-        help="area of the line types' CdAx: 'surface' (pi d, MoorDyn's, default) "
-        "or 'diameter' (d, DNV's and OrcaFlex's chain convention)",
-    )
-    p.add_argument(
-        "--free-points",
-        dest="free_points",
-        choices=("hold", "solve"),
-        default="hold",
-        help="the static equilibrium: free points held at their deck positions "
-        "('hold', default) or settled with the lines ('solve'; e.g. the free end of "
-        "MoorDyn's cantilevered beam)",
-    )
+    # `read_moordyn`'s choices; the first is the default
+    for option, choices, text in (
+        ("axial_drag", ("surface", "diameter"), "area of the line types' CdAx: "
+         "'surface' (pi d, MoorDyn's) or 'diameter' (d, DNV's and OrcaFlex's "
+         "chain convention)"),
+        ("free_points", ("hold", "solve"), "the static equilibrium: free points "
+         "held at their deck positions ('hold') or settled with the lines "
+         "('solve'; e.g. the free end of MoorDyn's cantilevered beam)"),
+    ):  # fmt: skip
+        p.add_argument("--" + option.replace("_", "-"), dest=option, choices=choices,
+                       default=choices[0],
+                       help=f"{text}; default {choices[0]!r}")  # fmt: skip
     p.add_argument(
         "--dt-out", dest="dt_out", type=float, default=0.1, help="output step, s"
     )

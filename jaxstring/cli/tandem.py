@@ -136,22 +136,25 @@ S1_CELLS_FULL = [(0.0, 0.0)] + [
 ]
 S1_CELLS_QUICK = [(0.0, 0.0), (15.0, 90.0), (15.0, 180.0), (20.0, 120.0)]
 
-# Spec S1 table [P]: (taut, admissible, stable)
-S1_SPEC = {
-    (0.0, 0.0): (4, 1, 0),
-    (5.0, 0.0): (3, 1, 0), (5.0, 30.0): (4, 1, 0), (5.0, 60.0): (4, 2, 1),
-    (5.0, 90.0): (4, 2, 1), (5.0, 120.0): (4, 3, 1), (5.0, 150.0): (4, 3, 1),
-    (5.0, 180.0): (3, 1, 0),
-    (10.0, 0.0): (3, 1, 1), (10.0, 30.0): (4, 1, 1), (10.0, 60.0): (4, 3, 1),
-    (10.0, 90.0): (4, 3, 1), (10.0, 120.0): (4, 3, 1), (10.0, 150.0): (4, 3, 1),
-    (10.0, 180.0): (10, 3, 0),
-    (15.0, 0.0): (4, 1, 1), (15.0, 30.0): (4, 1, 1), (15.0, 60.0): (4, 2, 1),
-    (15.0, 90.0): (4, 4, 1), (15.0, 120.0): (4, 3, 1), (15.0, 150.0): (8, 6, 2),
-    (15.0, 180.0): (12, 7, 2),
-    (20.0, 0.0): (4, 1, 1), (20.0, 30.0): (4, 1, 1), (20.0, 60.0): (4, 2, 1),
-    (20.0, 90.0): (4, 3, 1), (20.0, 120.0): (6, 5, 2), (20.0, 150.0): (6, 4, 2),
-    (20.0, 180.0): (12, 7, 2),
-}  # fmt: skip
+
+def _s1_spec():
+    """The tanker specification's table S1 [P] (`jaxstring/tandem/spec_s1.csv`):
+    {(V_w, Delta_w): (taut, admissible, stable)}, the numbers of equilibria."""
+    import csv
+    import pathlib
+
+    path = pathlib.Path(__file__).parents[1] / "tandem" / "spec_s1.csv"
+    with path.open() as f:
+        rows = csv.DictReader(line for line in f if not line.startswith("#"))
+        return {
+            (float(r["V_w"]), float(r["Delta_w"])): tuple(
+                int(r[k]) for k in ("taut", "admissible", "stable")
+            )
+            for r in rows
+        }
+
+
+S1_SPEC = _s1_spec()
 
 
 def equilibrium_table(cells):

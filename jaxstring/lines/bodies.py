@@ -27,7 +27,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._arrays import f64, param as _param
+from .._arrays import FloatScalar, f64, param as _param
 from .._validate import (
     check_choice,
     check_nonnegative,
@@ -99,10 +99,10 @@ class Body(eqx.Module):
     kind: str = eqx.field(static=True)
     position: Float[Array, "3"] = _param()
     rotation: Float[Array, "3"] = _param(default=(0.0, 0.0, 0.0))
-    mass: Float[Array, ""] = _param(default=0.0)
+    mass: FloatScalar = _param(default=0.0)
     cg: Float[Array, "3"] = _param(default=(0.0, 0.0, 0.0))
     inertia: Float[Array, "3"] = eqx.field(converter=_vector(3), default=0.0)
-    volume: Float[Array, ""] = _param(default=0.0)
+    volume: FloatScalar = _param(default=0.0)
     CdA: Float[Array, "6"] = eqx.field(converter=_vector(6), default=0.0)
     Ca: Float[Array, "3"] = eqx.field(converter=_vector(3), default=0.0)
     name: str = eqx.field(static=True, default="body")

@@ -59,8 +59,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float
 
+from .._arrays import BoolScalar, FloatScalar, IntScalar
 from .._geometry import safe_norm
 from .._validate import (
     check_finite,
@@ -68,6 +69,8 @@ from .._validate import (
     check_positive,
     check_shape,
     is_concrete,
+    options_of,
+    same_signature,
     show,
 )
 
@@ -101,14 +104,14 @@ class CatenarySolution(eqx.Module):
     - `iterations`: Newton iterations taken (0 for the closed-form cases).
     """
 
-    HF: Float[Array, ""]
-    VF: Float[Array, ""]
-    HA: Float[Array, ""]
-    VA: Float[Array, ""]
-    LB: Float[Array, ""]
-    residual: Float[Array, ""]
-    converged: Bool[Array, ""]
-    iterations: Int[Array, ""]
+    HF: FloatScalar
+    VF: FloatScalar
+    HA: FloatScalar
+    VA: FloatScalar
+    LB: FloatScalar
+    residual: FloatScalar
+    converged: BoolScalar
+    iterations: IntScalar
 
 
 # ---------------------------------------------------------------------------
@@ -755,20 +758,7 @@ def _forces(anchor, fairlead, L, EA, W, CB, on, tol, max_iter, given=None):
     return f_fairlead, f_anchor, sol
 
 
-def catenary_points(
-    s,
-    anchor,
-    fairlead,
-    L,
-    EA,
-    W,
-    CB=0.0,
-    anchor_on_seabed=True,
-    *,
-    solution: CatenarySolution | None = None,
-    tol=1e-9,
-    max_iter=100,
-):
+def catenary_points(s, anchor, fairlead, L, EA, W, **options):
     """Place the points of a catenary line in 3-D, with the tension along it.
 
     `catenary_profile` in the vertical plane through the line's ends, $z$ up.
@@ -777,29 +767,22 @@ def catenary_points(
 
     - `s`: unstretched arc lengths from the anchor, m, shape (n,), in $[0, L]$.
     - `anchor`, `fairlead`: end positions, m, shape (3,) each.
-    - `L` ... `max_iter`: as `catenary_forces`; `solution` as `catenary_profile`.
+    - `L`, `EA`, `W` and the options `CB`, `anchor_on_seabed`, `solution`, `tol`,
+      `max_iter`: as `catenary_profile`.
 
     **Returns:** `(points, T)`: positions, m, shape (n, 3), and effective tension,
     N, shape (n,).
     """
+    options = options_of(catenary_profile, "catenary_points", options, skip=6)
     _check3(anchor, fairlead)
     anchor, fairlead = _f64(anchor), _f64(fairlead)
     dh, XF, ZF = _frame(anchor, fairlead)
-    x, z, T = catenary_profile(
-        s,
-        XF,
-        ZF,
-        L,
-        EA,
-        W,
-        CB,
-        anchor_on_seabed,
-        solution=solution,
-        tol=tol,
-        max_iter=max_iter,
-    )
+    x, z, T = catenary_profile(s, XF, ZF, L, EA, W, **options)
     pos = XF > 0
     eh = jnp.where(pos, dh / jnp.where(pos, XF, 1.0), 0.0)
     pts = anchor + x[..., None] * jnp.concatenate([eh, jnp.zeros(1)])
     pts = pts + z[..., None] * jnp.array([0.0, 0.0, 1.0])
     return pts, T
+
+
+same_signature(catenary_points, catenary_profile, skip=6)

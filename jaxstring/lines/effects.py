@@ -8,9 +8,8 @@ model's mass matrix (line-type Ca, CaAx and point Ca), not an effect.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
 
-from .._arrays import f64 as _f64
+from .._arrays import FloatScalar, f64 as _f64
 from .._validate import check_nonnegative, check_shape
 from ..chain import AbstractChainLoad, ChainForces
 
@@ -46,12 +45,12 @@ class Seabed(AbstractChainLoad):
     - `eps`: width of the smooth contact edge, m (default 1e-3).
     """
 
-    depth: Float[Array, ""] = eqx.field(converter=_f64)
-    kBot: Float[Array, ""] = eqx.field(converter=_f64, default=3.0e6)
-    cBot: Float[Array, ""] = eqx.field(converter=_f64, default=3.0e5)
-    friction: Float[Array, ""] = eqx.field(converter=_f64, default=0.0)
-    fric_damp: Float[Array, ""] = eqx.field(converter=_f64, default=200.0)
-    eps: Float[Array, ""] = eqx.field(converter=_f64, default=1e-3)
+    depth: FloatScalar = eqx.field(converter=_f64)
+    kBot: FloatScalar = eqx.field(converter=_f64, default=3.0e6)
+    cBot: FloatScalar = eqx.field(converter=_f64, default=3.0e5)
+    friction: FloatScalar = eqx.field(converter=_f64, default=0.0)
+    fric_damp: FloatScalar = eqx.field(converter=_f64, default=200.0)
+    eps: FloatScalar = eqx.field(converter=_f64, default=1e-3)
 
     def __check_init__(self):
         for name, unit in (

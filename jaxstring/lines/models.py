@@ -38,7 +38,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .. import _programs
-from .._arrays import dot as _dot, host_op, param as _param
+from .._arrays import FloatScalar, dot as _dot, host_op, param as _param
 from .._blas import single_blas_thread
 from .._environment import Environment
 from .._geometry import safe_norm
@@ -118,10 +118,10 @@ class _AbstractPoint(eqx.Module):
     checks they share."""
 
     position: eqx.AbstractVar[Float[Array, "3"]]
-    mass: eqx.AbstractVar[Float[Array, ""]]
-    volume: eqx.AbstractVar[Float[Array, ""]]
-    CdA: eqx.AbstractVar[Float[Array, ""]]
-    Ca: eqx.AbstractVar[Float[Array, ""]]
+    mass: eqx.AbstractVar[FloatScalar]
+    volume: eqx.AbstractVar[FloatScalar]
+    CdA: eqx.AbstractVar[FloatScalar]
+    Ca: eqx.AbstractVar[FloatScalar]
 
     def __check_init__(self):
         check_shape_finite("position", self.position, (3,), "m")
@@ -140,10 +140,10 @@ class FreePoint(_AbstractPoint):
     """
 
     position: Float[Array, "3"] = _param()
-    mass: Float[Array, ""] = _param(default=0.0)
-    volume: Float[Array, ""] = _param(default=0.0)
-    CdA: Float[Array, ""] = _param(default=0.0)
-    Ca: Float[Array, ""] = _param(default=0.0)
+    mass: FloatScalar = _param(default=0.0)
+    volume: FloatScalar = _param(default=0.0)
+    CdA: FloatScalar = _param(default=0.0)
+    Ca: FloatScalar = _param(default=0.0)
 
 
 class BodyPoint(_AbstractPoint):
@@ -157,10 +157,10 @@ class BodyPoint(_AbstractPoint):
 
     body: int = eqx.field(static=True)
     position: Float[Array, "3"] = _param()
-    mass: Float[Array, ""] = _param(default=0.0)
-    volume: Float[Array, ""] = _param(default=0.0)
-    CdA: Float[Array, ""] = _param(default=0.0)
-    Ca: Float[Array, ""] = _param(default=0.0)
+    mass: FloatScalar = _param(default=0.0)
+    volume: FloatScalar = _param(default=0.0)
+    CdA: FloatScalar = _param(default=0.0)
+    Ca: FloatScalar = _param(default=0.0)
 
     def __check_init__(self):
         # runs before `_AbstractPoint`'s checks (equinox: in method resolution order)

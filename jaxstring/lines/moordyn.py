@@ -32,6 +32,7 @@ import numpy as np
 
 from .._environment import Environment
 from .._scene import Scene
+from .._validate import options_of, same_signature
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
 from .bodies import Body, rotation_matrix
 from .effects import Seabed
@@ -1057,26 +1058,15 @@ def _deck_rods(deck, rigid_motion) -> tuple:
     return tuple(rods)
 
 
-def read_moordyn(
-    path,
-    motion=None,
-    t1=None,
-    t0=None,
-    static=True,
-    axial_drag="surface",
-    free_points="hold",
-) -> Scene:
-    """Read a MoorDyn v2 deck into a `Scene` at static equilibrium (see
-    `parse_moordyn` and `deck_scene` for the arguments)."""
-    return deck_scene(
-        parse_moordyn(path),
-        motion=motion,
-        t1=t1,
-        t0=t0,
-        static=static,
-        axial_drag=axial_drag,
-        free_points=free_points,
-    )
+def read_moordyn(path, **options) -> Scene:
+    """Read a MoorDyn v2 deck into a `Scene` at static equilibrium: `deck_scene`
+    of `parse_moordyn(path)`, with `deck_scene`'s keyword options (`motion`,
+    `t1`, `t0`, `static`, `free_points`, `axial_drag`)."""
+    options = options_of(deck_scene, "read_moordyn", options)
+    return deck_scene(parse_moordyn(path), **options)
+
+
+same_signature(read_moordyn, deck_scene)
 
 
 @eqx.filter_jit
@@ -1144,9 +1134,7 @@ def output_channels(traj, scene: Scene) -> dict:
         ch[f"ANCHTEN{lid}"] = ta[:, k]
     nodes = np.asarray(obs["nodes"])
     for k, lid in enumerate(ids):
-        for i, m in enumerate(model.line_nodes(k)):
-            for c, axis in enumerate("XYZ"):
-                ch[f"L{lid}N{i}P{axis}"] = nodes[:, m, c]
+        _node_channels(ch, f"L{lid}", nodes, model.line_nodes(k))
     if model.rods:
         get = lambda key: np.asarray(obs[key])
         q = get("rod_axis")
@@ -1164,9 +1152,7 @@ def output_channels(traj, scene: Scene) -> dict:
             ch[f"{p}RX"], ch[f"{p}RY"] = rx[:, r], ry[:, r]
             _rigid_channels(ch, p, get, "rod", r, force, ("V", "RV", "A", "RA"))
             ch[f"{p}TENA"], ch[f"{p}TENB"] = ten[:, r, 0], ten[:, r, 1]
-            for i, m in enumerate(model.rod_nodes(r)):
-                for c, axis in enumerate("XYZ"):
-                    ch[f"{p}N{i}P{axis}"] = rnodes[:, m, c]
+            _node_channels(ch, p, rnodes, model.rod_nodes(r))
     if model.bodies:
         get = lambda key: np.asarray(obs[key])
         force = get("body_force")
@@ -1204,6 +1190,14 @@ _RIGID_CHANNELS = {
 }
 """MoorDyn's rigid-object channel -> (observable after `rod_`/`body_`, scale to
 MoorDyn's units: degrees for rotations)."""
+
+
+def _node_channels(ch, prefix, nodes, rows):
+    """Add the channels `<prefix>N<i>P<X|Y|Z>` of the nodes `rows` of `nodes`
+    `(T, M, 3)` to `ch`."""
+    for i, m in enumerate(rows):
+        for c, axis in enumerate("XYZ"):
+            ch[f"{prefix}N{i}P{axis}"] = nodes[:, m, c]
 
 
 def _rigid_channels(ch, prefix, get, kind, i, force, names):

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._arrays import param as _param
+from .._arrays import FloatScalar, param as _param
 from .._geometry import safe_norm
 from .._validate import check_choice, check_finite, check_nonnegative, check_shape
 from .rigid import RigidMotion
@@ -63,12 +63,12 @@ class Rod(eqx.Module):
     end_a: Float[Array, "3"] = _param()
     end_b: Float[Array, "3"] = _param()
     segments: int = eqx.field(static=True)
-    d: Float[Array, ""] = _param()
-    w: Float[Array, ""] = _param()
-    Cd: Float[Array, ""] = _param(default=0.0)
-    Ca: Float[Array, ""] = _param(default=0.0)
-    CdEnd: Float[Array, ""] = _param(default=0.0)
-    CaEnd: Float[Array, ""] = _param(default=0.0)
+    d: FloatScalar = _param()
+    w: FloatScalar = _param()
+    Cd: FloatScalar = _param(default=0.0)
+    Ca: FloatScalar = _param(default=0.0)
+    CdEnd: FloatScalar = _param(default=0.0)
+    CaEnd: FloatScalar = _param(default=0.0)
     kind: str = eqx.field(static=True, default="fixed")
     body: int | None = eqx.field(static=True, default=None)
     motion: RigidMotion | None = None

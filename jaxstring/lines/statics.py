@@ -68,9 +68,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float
 
-from .._arrays import f64, param as _param
+from .._arrays import BoolScalar, FloatScalar, IntScalar, f64, param as _param
 from .._validate import (
     check_choice,
     check_int,
@@ -78,6 +78,8 @@ from .._validate import (
     check_positive,
     check_shape_finite,
     is_concrete,
+    options_of,
+    same_signature,
     show,
 )
 from .bodies import Body, euler_angles, rotation_from_vector, rotation_matrix
@@ -135,8 +137,8 @@ class MooringPoint(eqx.Module):
 
     kind: str = eqx.field(static=True)
     position: Float[Array, "3"] = _param()
-    mass: Float[Array, ""] = _param(default=0.0)
-    volume: Float[Array, ""] = _param(default=0.0)
+    mass: FloatScalar = _param(default=0.0)
+    volume: FloatScalar = _param(default=0.0)
     body: int = eqx.field(static=True, default=-1)
     name: str = eqx.field(static=True, default="point")
 
@@ -239,9 +241,9 @@ class MooringSystem(eqx.Module):
     w: Float[Array, " n"]
     EA: Float[Array, " n"]
     CB: Float[Array, " n"]
-    depth: Float[Array, ""] | None
-    g: Float[Array, ""]
-    rho: Float[Array, ""]
+    depth: FloatScalar | None
+    g: FloatScalar
+    rho: FloatScalar
     hydrostatics: Float[Array, "b 6 6"] | None
     hydrostatic_pose: Float[Array, "b 6"] | None
     anchor_end: tuple = eqx.field(static=True)  # per line: 0 (A), 1 (B), -1 (none)
@@ -491,11 +493,11 @@ class MooringEquilibrium(eqx.Module):
     catenary: CatenarySolution
     coupled_force: Float[Array, " c"]
     free: Float[Array, " f"]
-    residual: Float[Array, ""]
-    force_scale: Float[Array, ""]
-    converged: Bool[Array, ""]
-    status: Int[Array, ""]
-    iterations: Int[Array, ""]
+    residual: FloatScalar
+    force_scale: FloatScalar
+    converged: BoolScalar
+    status: IntScalar
+    iterations: IntScalar
 
     @property
     def message(self) -> str:
@@ -714,8 +716,9 @@ def _check_options(current, tol, max_iter, max_step):
 
 
 def _checked(
-    system, loads, offsets, guess, current, tol, max_iter, max_step, throw, stiffness
-):
+    system, loads, offsets, guess, current, tol, max_iter, max_step, throw,
+    stiffness=False,
+):  # fmt: skip
     """The checked arguments of `mooring_equilibrium` (`stiffness` False) or
     `coupled_stiffness` (True): `(system, loads, offsets, guess)` as strongly
     typed arrays, and the solve's `_Cfg`."""
@@ -1146,7 +1149,7 @@ def mooring_equilibrium(
     argument, its value and the valid range.
     """
     args, cfg = _checked(
-        system, loads, offsets, guess, current, tol, max_iter, max_step, throw, False
+        system, loads, offsets, guess, current, tol, max_iter, max_step, throw
     )
     return _equilibrium(*args, cfg)
 
@@ -1165,18 +1168,7 @@ def _throw(out):
     )
 
 
-def coupled_stiffness(
-    system: MooringSystem,
-    loads=None,
-    *,
-    offsets=None,
-    guess=None,
-    current=None,
-    tol: float = 1e-10,
-    max_iter: int = 100,
-    max_step: float = 20.0,
-    throw: bool = True,
-):
+def coupled_stiffness(system: MooringSystem, loads=None, **options):
     r"""Compute the stiffness of the coupled degrees of freedom, free ones re-balanced.
 
     At the equilibrium of the free degrees of freedom (`mooring_equilibrium`),
@@ -1189,15 +1181,19 @@ def coupled_stiffness(
     the reference point, N m. Derivatives of `K` with respect to every parameter
     are exact too.
 
-    **Arguments:** as `mooring_equilibrium`.
+    **Arguments:** `system`, `loads` and the keyword options of
+    `mooring_equilibrium` (`offsets`, `guess`, `current`, `tol`, `max_iter`,
+    `max_step`, `throw`).
 
     **Returns:** `(K, equilibrium)`: `K` of shape (n_coupled, n_coupled) in N/m,
     N/rad, N m/m, N m/rad, and the `MooringEquilibrium`.
     """
-    args, cfg = _checked(
-        system, loads, offsets, guess, current, tol, max_iter, max_step, throw, True
-    )
+    options = options_of(mooring_equilibrium, "coupled_stiffness", options, skip=2)
+    args, cfg = _checked(system, loads, stiffness=True, **options)
     return _stiffness(*args, cfg)
+
+
+same_signature(coupled_stiffness, mooring_equilibrium, skip=2)
 
 
 # ---------------------------------------------------------------------------

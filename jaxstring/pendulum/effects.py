@@ -25,6 +25,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._arrays import FloatScalar
 from .._effect import AbstractEffect, AbstractLoad
 from .._geometry import down
 from .._validate import check_nonnegative
@@ -45,8 +46,8 @@ class Kinematics(eqx.Module):
 
     positions: Float[Array, "n dim"]
     velocities: Float[Array, "n dim"]
-    line_mass: Float[Array, ""]
-    end_mass: Float[Array, ""]
+    line_mass: FloatScalar
+    end_mass: FloatScalar
 
     @property
     def up(self):
@@ -110,7 +111,7 @@ class KelvinVoigt(AbstractTensionLaw):
     - `alpha`: dissipation constant, s (>= 0).
     """
 
-    alpha: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.01)
+    alpha: FloatScalar = eqx.field(converter=jnp.asarray, default=0.01)
     order: ClassVar[int] = 0
 
     def __check_init__(self):

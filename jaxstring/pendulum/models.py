@@ -20,8 +20,9 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array
 
+from .._arrays import FloatScalar
 from .._geometry import direction, safe_norm
 from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
 from .._model import AbstractModel, SolverStructure
@@ -51,10 +52,10 @@ class AbstractString(AbstractModel):
     parameters; `k` (number of elements) and `dim` (2 or 3) are structure.
     """
 
-    l: Float[Array, ""] = _param()
-    mu: Float[Array, ""] = _param()
-    m_s: Float[Array, ""] = _param()
-    EA: Float[Array, ""] = _param()
+    l: FloatScalar = _param()
+    mu: FloatScalar = _param()
+    m_s: FloatScalar = _param()
+    EA: FloatScalar = _param()
     k: int = eqx.field(static=True)
     dim: int = eqx.field(static=True, default=2)
     formulation: ClassVar[str]

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._arrays import FloatScalar
 from .._model import AbstractModel
 from .._validate import check_nonnegative, check_positive, check_shape
 from .vessels import (
@@ -133,10 +134,10 @@ class NonlinearCompensator(AbstractActuator):
     K_D: Float[Array, "2"] = _param((0.1, 0.1))
     K_I: Float[Array, "2"] | None = _optional_param()
     K_aw: Float[Array, "2"] = _param((400.0, 400.0))
-    d_ref: Float[Array, ""] = _param(81.47)
-    X_max: Float[Array, ""] = _param(1.5e6)
-    N_max: Float[Array, ""] = _param(1.0e8)
-    reg: Float[Array, ""] = _param(1e-8)
+    d_ref: FloatScalar = _param(81.47)
+    X_max: FloatScalar = _param(1.5e6)
+    N_max: FloatScalar = _param(1.0e8)
+    reg: FloatScalar = _param(1e-8)
     internal_model: object = None
     internal_effects: tuple | None = None
     integral: Float[Array, "2"] | None = _optional_param()
@@ -297,9 +298,9 @@ class ComputedForcePD(AbstractActuator):
 
     K_P: Float[Array, "2"] = _param((0.0025, 0.0025))
     K_D: Float[Array, "2"] = _param((0.1, 0.1))
-    d_ref: Float[Array, ""] = _param(81.47)
-    X_max: Float[Array, ""] = _param(1.5e6)
-    N_max: Float[Array, ""] = _param(1.0e8)
+    d_ref: FloatScalar = _param(81.47)
+    X_max: FloatScalar = _param(1.5e6)
+    N_max: FloatScalar = _param(1.0e8)
 
     def __check_init__(self):
         check_shape("K_P", self.K_P, (2,), "(span, heading)")

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._arrays import FloatScalar
 from .._model import AbstractModel, SolverStructure
 from .._validate import check_nonnegative
 from ..chain import AbstractEnd, EndKinematics
@@ -72,7 +73,7 @@ class TurretLines(AbstractVesselLoad):
     """
 
     system: MooringSystem
-    c_m: Float[Array, ""] = _param(6.0e5)
+    c_m: FloatScalar = _param(6.0e5)
     tol: float = eqx.field(static=True, default=1e-8)
 
     def __check_init__(self):
@@ -274,7 +275,7 @@ class MooredVessels(AbstractModel):
     vessels: AbstractModel
     network: LineNetwork
     fairleads: tuple = eqx.field(static=True)
-    c_m: Float[Array, ""] = _param(0.0)
+    c_m: FloatScalar = _param(0.0)
     current: bool = eqx.field(static=True, default=False)
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = LineNetwork.accepts + (

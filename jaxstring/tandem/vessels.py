@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._arrays import host_op
+from .._arrays import FloatScalar, host_op
 from .._effect import AbstractEffect, AbstractLoad
 from .._environment import Environment
 from .._model import AbstractModel
@@ -110,20 +110,20 @@ class Hull(eqx.Module):
     Use `make_hull` to get the added masses from the spec's formulas.
     """
 
-    L: Float[Array, ""] = _param()
-    B: Float[Array, ""] = _param()
-    T: Float[Array, ""] = _param()
-    C_B: Float[Array, ""] = _param()
-    m: Float[Array, ""] = _param()
-    S: Float[Array, ""] = _param()
-    I_z: Float[Array, ""] = _param()
-    A11: Float[Array, ""] = _param()
-    A22: Float[Array, ""] = _param()
-    A66: Float[Array, ""] = _param()
-    C_Y: Float[Array, ""] = _param()
-    lam_p: Float[Array, ""] = _param()
-    A_F: Float[Array, ""] = _param()
-    A_L: Float[Array, ""] = _param()
+    L: FloatScalar = _param()
+    B: FloatScalar = _param()
+    T: FloatScalar = _param()
+    C_B: FloatScalar = _param()
+    m: FloatScalar = _param()
+    S: FloatScalar = _param()
+    I_z: FloatScalar = _param()
+    A11: FloatScalar = _param()
+    A22: FloatScalar = _param()
+    A66: FloatScalar = _param()
+    C_Y: FloatScalar = _param()
+    lam_p: FloatScalar = _param()
+    A_F: FloatScalar = _param()
+    A_L: FloatScalar = _param()
 
     def __check_init__(self):
         for name, unit in (
@@ -267,8 +267,8 @@ class AbstractActuator(AbstractEffect):
 
     The model saturates the `command` smoothly to |X| < X_max, |N| < N_max."""
 
-    X_max: eqx.AbstractVar[Float[Array, ""]]
-    N_max: eqx.AbstractVar[Float[Array, ""]]
+    X_max: eqx.AbstractVar[FloatScalar]
+    N_max: eqx.AbstractVar[FloatScalar]
 
     @abc.abstractmethod
     def command(self, t, y, model, effects, env) -> Array:
@@ -383,8 +383,8 @@ class OCIMFWind(AbstractVesselLoad):
       default loaded for both).
     """
 
-    speed: Float[Array, ""] = _param(0.0)
-    direction: Float[Array, ""] = _param(math.pi)
+    speed: FloatScalar = _param(0.0)
+    direction: FloatScalar = _param(math.pi)
     loading: tuple[str, ...] = eqx.field(static=True, default=("loaded", "loaded"))
 
     def __check_init__(self):
@@ -435,11 +435,11 @@ class Hawser(AbstractVesselLoad):
     length, m), `s` (slack smoothing length, m), `c_h` (damping, N s/m, >= 0).
     """
 
-    l0: Float[Array, ""] = _param(HAWSER_L0)
-    k_h: Float[Array, ""] = _param(HAWSER_K_H)
-    delta_h: Float[Array, ""] = _param(10.0)
-    s: Float[Array, ""] = _param(0.05)
-    c_h: Float[Array, ""] = _param(0.0)
+    l0: FloatScalar = _param(HAWSER_L0)
+    k_h: FloatScalar = _param(HAWSER_K_H)
+    delta_h: FloatScalar = _param(10.0)
+    s: FloatScalar = _param(0.05)
+    c_h: FloatScalar = _param(0.0)
 
     def __check_init__(self):
         check_fields(
@@ -501,9 +501,9 @@ class TurretMooring(AbstractVesselLoad):
     **Arguments:** `k_m` (N/m), `rho_m` (hardening length, m), `c_m` (N s/m).
     """
 
-    k_m: Float[Array, ""] = _param(1.0e5)
-    rho_m: Float[Array, ""] = _param(50.0)
-    c_m: Float[Array, ""] = _param(6.0e5)
+    k_m: FloatScalar = _param(1.0e5)
+    rho_m: FloatScalar = _param(50.0)
+    c_m: FloatScalar = _param(6.0e5)
 
     def __check_init__(self):
         check_positive("k_m", self.k_m, "N/m")
@@ -548,10 +548,10 @@ class ConstantThrust(AbstractActuator):
     **Arguments:** `F_ast` (astern pull, N), `N` (yaw moment, N m), `X_max`,
     `N_max` (limits, > 0)."""
 
-    F_ast: Float[Array, ""] = _param(0.0)
-    N: Float[Array, ""] = _param(0.0)
-    X_max: Float[Array, ""] = _param(1.5e6)
-    N_max: Float[Array, ""] = _param(1.0e8)
+    F_ast: FloatScalar = _param(0.0)
+    N: FloatScalar = _param(0.0)
+    X_max: FloatScalar = _param(1.5e6)
+    N_max: FloatScalar = _param(1.0e8)
 
     def __check_init__(self):
         check_finite("F_ast", self.F_ast)
@@ -723,9 +723,9 @@ class Tandem(AbstractModel):
 
     fpso: Hull
     shuttle: Hull
-    x_t: Float[Array, ""] = _param(128.0)
-    x_h1: Float[Array, ""] = _param(-160.0)
-    x_h2: Float[Array, ""] = _param(125.0)
+    x_t: FloatScalar = _param(128.0)
+    x_h1: FloatScalar = _param(-160.0)
+    x_h2: FloatScalar = _param(125.0)
     n_vessels: ClassVar[int] = 2
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (AbstractVesselLoad, AbstractActuator)
@@ -803,7 +803,7 @@ class MooredFPSO(AbstractModel):
     """
 
     fpso: Hull
-    x_t: Float[Array, ""] = _param(128.0)
+    x_t: FloatScalar = _param(128.0)
     n_vessels: ClassVar[int] = 1
     projects: ClassVar[bool] = False
     accepts: ClassVar[tuple[type, ...]] = (AbstractVesselLoad,)

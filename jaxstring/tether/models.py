@@ -50,9 +50,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array
 
-from .._arrays import dot as _dot, param as _param
+from .._arrays import FloatScalar, dot as _dot, param as _param
 from .._jit import eager_jit
 from .._model import AbstractModel, SolverStructure
 from .._validate import (
@@ -180,10 +180,10 @@ class AbstractTether(AbstractModel):
     released length L_r(t), m, or `None` for a fixed length) are structure.
     """
 
-    L: Float[Array, ""] = _param()
-    d: Float[Array, ""] = _param()
-    mass_per_length: Float[Array, ""] = _param()
-    added_mass: Float[Array, ""] = _param(default=1.0)
+    L: FloatScalar = _param()
+    d: FloatScalar = _param()
+    mass_per_length: FloatScalar = _param()
+    added_mass: FloatScalar = _param(default=1.0)
     N: int = eqx.field(static=True, default=101)
     root: AbstractEnd = eqx.field(default_factory=lambda: FixedEnd(jnp.zeros(3)))
     fast: AbstractEnd = eqx.field(default_factory=FreeEnd)
@@ -539,9 +539,9 @@ class AceamTether(AbstractTether):
     links' errors cancel in the sum): it measures the end forces, not the regulator.
     """
 
-    T: Float[Array, ""] = _param(default=0.1)
-    T1: Float[Array, ""] = _param(default=0.025)
-    k: Float[Array, ""] = _param(default=1e4)
+    T: FloatScalar = _param(default=0.1)
+    T1: FloatScalar = _param(default=0.025)
+    k: FloatScalar = _param(default=1e4)
     feedforward: bool = eqx.field(static=True, default=False)
     method: ClassVar[str] = "aceam"
 
@@ -596,8 +596,8 @@ class ExactTether(AbstractTether):
     `CoupledEnd`).
     """
 
-    omega: Float[Array, ""] = _param(default=20.0)
-    k: Float[Array, ""] = _param(default=1e4)
+    omega: FloatScalar = _param(default=20.0)
+    k: FloatScalar = _param(default=1e4)
     end_links: str = eqx.field(static=True, default="rigid")
     method: ClassVar[str] = "exact"
 
@@ -678,8 +678,8 @@ class LmsTether(AbstractTether):
     **Arguments:** as `AbstractTether`, plus `k` (N) and `c` (damping, N s; >= 0).
     """
 
-    k: Float[Array, ""] = _param(default=4e5)
-    c: Float[Array, ""] = _param(default=0.0)
+    k: FloatScalar = _param(default=4e5)
+    c: FloatScalar = _param(default=0.0)
     method: ClassVar[str] = "lms"
 
     def __check_init__(self):

@@ -164,6 +164,10 @@ def test_axial_drag_area():
         lines.Drag(axial_area="wetted")
     with pytest.raises(ValueError, match="axial_drag"):
         lines.read_moordyn(lines.case_path("WD0050_Chain.txt"), axial_drag="pi")
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['t2'\]"):
+        lines.read_moordyn(lines.case_path("WD0050_Chain.txt"), t2=5.0)
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['tolerance'\]"):
+        lines.coupled_stiffness(None, tolerance=1e-8)
 
 
 def test_ramp_in():

@@ -344,7 +344,8 @@ def test_S1_dogleg_roots_are_newton_roots():
     assert counts(dogleg)[1:] == counts(newton)[1:]
 
 
-SPEC_FILE = Path(__file__).resolve().parents[2] / "shared" / "specs" / "tanker.md"
+# The specification, in the shared folder beside the repository.
+SPEC_FILE = Path(__file__).resolve().parents[3] / "shared" / "specs" / "tanker.md"
 
 
 def spec_s1_table():
@@ -363,6 +364,12 @@ def spec_s1_table():
                 table[(float(m.group(1)), 30.0 * j)] = tuple(counts)
     assert len(table) == 29, "the spec's S1 table has 1 + 4 x 7 cells"
     return table
+
+
+def test_packaged_S1_table_is_the_specs():
+    from jaxstring.cli.tandem import S1_SPEC
+
+    assert S1_SPEC == spec_s1_table()
 
 
 @pytest.mark.slow
