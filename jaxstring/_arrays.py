@@ -59,3 +59,17 @@ def host_op(op, *arrays):
         (next(iter(a.devices())) for a in arrays if isinstance(a, jax.Array)), None
     )
     return jax.device_put(out, device)
+
+
+def host_map(op, tree):
+    """`op(xp, x)` on every array leaf `x` of `tree`, as `host_op` does for one
+    array; where every leaf is on the host, the results go to the device in one
+    `device_put` (one transfer call for the whole tree, not one per leaf)."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    if not all(on_host(x) for x in leaves):
+        return jax.tree_util.tree_unflatten(treedef, [op(jnp, x) for x in leaves])
+    out = [op(np, np.asarray(x)) for x in leaves]
+    device = next(
+        (next(iter(x.devices())) for x in leaves if isinstance(x, jax.Array)), None
+    )
+    return jax.tree_util.tree_unflatten(treedef, jax.device_put(out, device))

@@ -12,11 +12,10 @@ import dataclasses
 
 import diffrax as dfx
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from . import _programs
-from ._arrays import host_op
+from ._arrays import host_map, host_op
 from ._jit import cpu_jit
 from ._scene import Scene, scene_vector_field
 from ._solve_config import SolveConfig
@@ -210,14 +209,9 @@ def _first_rows(traj: Trajectory, n: int) -> Trajectory:
     the same, as the padding repeats the last time."""
     if traj.ts.shape[0] == n:
         return traj
-    cut = lambda x: host_op(lambda xp, x: x[:n], x)
-    return dataclasses.replace(
-        traj,
-        ts=cut(traj.ts),
-        ys=cut(traj.ys),
-        obs=jax.tree_util.tree_map(cut, traj.obs),
-        n_valid=host_op(lambda xp, v: xp.minimum(v, n), traj.n_valid),
-    )
+    ts, ys, obs = host_map(lambda xp, x: x[:n], (traj.ts, traj.ys, traj.obs))
+    n_valid = host_op(lambda xp, v: xp.minimum(v, n), traj.n_valid)
+    return dataclasses.replace(traj, ts=ts, ys=ys, obs=obs, n_valid=n_valid)
 
 
 def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:

@@ -70,7 +70,44 @@ def _types(x, out=None) -> str:
     return ",".join(out)
 
 
+_KEYS = {}  # _memo(...) -> _key(...), in this process
+
+
+def _memo(fn, static, treedef, leaves):
+    """What decides `_key` in this process, hashable (equal for equal static
+    values of equal types: a float by its bits), or None where a static value
+    is not hashable: the repr behind `_key` of a large scene takes milliseconds,
+    longer than a small solve."""
+
+    def exact(x):
+        return (type(x), x.hex() if isinstance(x, float) else x)
+
+    static_leaves, static_def = jtu.tree_flatten(static)
+    memo = (
+        fn,
+        static_def,
+        tuple(exact(x) for x in static_leaves),
+        treedef,
+        tuple((x.shape, str(x.dtype)) for x in leaves),
+    )
+    try:
+        hash(memo)
+    except TypeError:
+        return None
+    return memo
+
+
 def _key(fn, static, treedef, leaves) -> str | None:
+    memo = _memo(fn, static, treedef, leaves)
+    if memo is not None and memo in _KEYS:
+        return _KEYS[memo]
+    key = _full_key(fn, static, treedef, leaves)
+    if memo is not None:
+        _KEYS[memo] = key
+    return key
+
+
+def _full_key(fn, static, treedef, leaves) -> str | None:
     name = f"{fn.__module__}.{fn.__qualname__}"
     if "<lambda>" in name:  # nameless: two lambdas would share one program
         return None

@@ -13,6 +13,7 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._arrays import host_op
 from ._solvers.registry import check_solver, is_adaptive
@@ -91,10 +92,14 @@ def make_adjoint(adjoint, checkpoints=None):
 
 
 def _f64(x):
+    """`x` as a float64 array: a NumPy one for a Python or NumPy number (no
+    device call; the solve's call moves it), a JAX one for a JAX array or tracer."""
     if x is None or isinstance(x, str):
         return x
     try:
-        return jnp.asarray(x, dtype=jnp.float64)
+        if isinstance(x, (jax.Array, jax.core.Tracer)):
+            return jnp.asarray(x, dtype=jnp.float64)
+        return np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError):
         return x  # refused by name in __check_init__
 

@@ -105,3 +105,32 @@ def test_solves_on_a_named_second_device_equal_those_on_the_first():
     ends, fits, alpha = map(float, run_on_two_cpu_devices(code).split())
     assert ends < 1e-12 and fits < 1e-12
     assert abs(alpha - 0.02) < 1e-6  # the fit finds the damping of the data
+
+
+def test_saved_program_keys_follow_every_static_value():
+    """The in-process memo of saved-program keys gives the key of the full
+    computation, and a different key whenever a static value (or its type)
+    differs."""
+    import equinox as eqx
+    import jax.tree_util as jtu
+
+    from jaxstring import _integrate, _programs
+
+    def key(scene, **options):
+        config = js.SolveConfig(**options)
+        dynamic, static = eqx.partition((scene, config), eqx.is_array)
+        leaves, treedef = jtu.tree_flatten(dynamic)
+        fn = _integrate._solve_fields
+        memo = _programs._key(fn, static, treedef, leaves)
+        assert memo == _programs._full_key(fn, static, treedef, leaves)
+        return memo
+
+    scene = js.string_pendulum(k=4)
+    base = key(scene, solver="tsit5")
+    assert key(scene, solver="tsit5") == base
+    assert key(scene, solver="tsit5", rtol=1e-3) == base  # rtol is an array leaf
+    assert key(scene, solver="dopri5") != base
+    assert key(scene, solver="tsit5", n_save=11) != base
+    assert key(js.string_pendulum(k=5), solver="tsit5") != base
+    one = key(scene, solver="tsit5", max_steps=1000)
+    assert key(scene, solver="tsit5", max_steps=1001) != one
