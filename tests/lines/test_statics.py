@@ -35,7 +35,10 @@ DECK = lines.case_path("lines.txt")
 
 
 def _moorpy():
-    return pytest.importorskip("jaxstring.testing.moorpy_peer")
+    pytest.importorskip("moorpy")  # the peer module imports it when called
+    from jaxstring.testing import moorpy_peer
+
+    return moorpy_peer
 
 
 @pytest.fixture(scope="module")

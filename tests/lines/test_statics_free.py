@@ -40,7 +40,10 @@ K33 = 332941.0  # N/m, OC3's heave waterplane stiffness
 
 
 def _moorpy():
-    return pytest.importorskip("jaxstring.testing.moorpy_peer")
+    pytest.importorskip("moorpy")  # the peer module imports it when called
+    from jaxstring.testing import moorpy_peer
+
+    return moorpy_peer
 
 
 @pytest.fixture(scope="module")
