@@ -1,17 +1,20 @@
 """What OpenBLAS threading costs on a small machine, and what jaxstring's guard saves.
 
 Question: how long does a 160 x 160 LU factorisation take (scipy and JAX on CPU)
-when OpenBLAS runs one thread per core, and when jaxstring's start-up guard
-(`jaxstring._config`) has limited it to one thread? Each configuration runs in its
-own process, because OpenBLAS reads its thread count when it loads:
+when OpenBLAS runs one thread per core, and inside jaxstring's calls, which limit
+every loaded BLAS library to one thread while they run (`jaxstring._blas`,
+threadpoolctl) and leave the user's own code as it is? Each configuration runs in
+its own process, because OpenBLAS reads its thread count when it loads:
 
 * ``threads=<cores>``: ``OPENBLAS_NUM_THREADS`` set to the core count (what an
   unset variable gives), numpy imported, jaxstring not imported;
-* ``guard: numpy first``: variable unset, the user imports numpy, then jaxstring
-  (the guard limits the live pool with threadpoolctl, when installed);
-* ``guard: jaxstring first``: variable unset, jaxstring imported first (the guard
-  sets the variable before OpenBLAS loads);
+* ``guard: numpy first``: variable unset, the user imports numpy, then jaxstring;
+* ``guard: jaxstring first``: variable unset, jaxstring imported first;
 * ``threads=1``: the variable set by hand.
+
+In the guard rows the JAX LU is also timed inside jaxstring's guard (the block
+its solves run in: ``jax_lu_guarded_ms``), with the pool size seen there; the
+other columns are the user's own calls, outside it.
 
 Run: ``python experiments/blas_threads.py [--quick]``.
 """
@@ -48,18 +51,26 @@ def med(fn):
     return statistics.median(ts)
 aj = jnp.asarray(a)
 lu = jax.jit(jax.scipy.linalg.lu_factor)
-try:
-    from threadpoolctl import threadpool_info
+def live():
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return -1
     pools = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-    th = max(pools, default=-1)
-except ImportError:
-    th = -1
-print(json.dumps({
+    return max(pools, default=-1)
+row = {
     "scipy_lu_ms": 1e3 * med(lambda: scipy.linalg.lu_factor(a)),
     "jax_lu_ms": 1e3 * med(lambda: jax.block_until_ready(lu(aj))),
-    "blas_threads_live": th,
+    "blas_threads_live": live(),
     "env": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
-}))
+}
+if mode.startswith("guard"):
+    from jaxstring._blas import one_blas_thread
+    with one_blas_thread():
+        row["jax_lu_guarded_ms"] = 1e3 * med(lambda: jax.block_until_ready(lu(aj)))
+        row["blas_threads_in_call"] = live()
+    row["blas_threads_after"] = live()
+print(json.dumps(row))
 """
 
 MODES = {
@@ -99,6 +110,8 @@ def main(quick=False):
     for r in rows:
         r["scipy_vs_1thread"] = r["scipy_lu_ms"] / base["scipy_lu_ms"]
         r["jax_vs_1thread"] = r["jax_lu_ms"] / base["jax_lu_ms"]
+        if "jax_lu_guarded_ms" in r:
+            r["guarded_vs_1thread"] = r["jax_lu_guarded_ms"] / base["jax_lu_ms"]
         print(
             f"{r['config']:24s} scipy {r['scipy_lu_ms']:8.3f} ms  jax "
             f"{r['jax_lu_ms']:8.3f} ms  live BLAS threads {r['blas_threads_live']}"
@@ -109,14 +122,19 @@ def main(quick=False):
         rows,
         (
             "config env blas_threads_live scipy_lu_ms jax_lu_ms scipy_vs_1thread "
-            "jax_vs_1thread"
+            "jax_vs_1thread blas_threads_in_call jax_lu_guarded_ms guarded_vs_1thread "
+            "blas_threads_after"
         ).split(),
         f"{N} x {N} LU factorisation vs OpenBLAS threads (median of {reps})",
         notes=[
             "Each row is its own process (OpenBLAS reads its thread count on load).",
             "blas_threads_live: OpenBLAS pool size seen by threadpoolctl "
             "(-1: not installed).",
-            "x_vs_1thread: time / the threads=1 row, same run.",
+            "x_vs_1thread: time / the threads=1 row's JAX (or scipy) LU, same run.",
+            "guard rows: blas_threads_in_call and jax_lu_guarded_ms inside "
+            "jaxstring's guard (`jaxstring._blas.one_blas_thread`, the block its "
+            "solves run in); blas_threads_after: the pool once the block is left; "
+            "the other columns are the user's own calls outside it.",
         ],
     )
     fig, axes = new_figure(1, 1)
