@@ -138,12 +138,13 @@ S1_CELLS_QUICK = [(0.0, 0.0), (15.0, 90.0), (15.0, 180.0), (20.0, 120.0)]
 
 
 def _s1_spec():
-    """The tanker specification's table S1 [P] (`jaxstring/tandem/spec_s1.csv`):
-    {(V_w, Delta_w): (taut, admissible, stable)}, the numbers of equilibria."""
+    """The tanker specification's table S1 [P]
+    (`jaxstring/tandem/spec_S1_equilibria.csv`): {(V_w, Delta_w): (taut,
+    admissible, stable)}, the numbers of equilibria."""
     import csv
     import pathlib
 
-    path = pathlib.Path(__file__).parents[1] / "tandem" / "spec_s1.csv"
+    path = pathlib.Path(__file__).parents[1] / "tandem" / "spec_S1_equilibria.csv"
     with path.open() as f:
         rows = csv.DictReader(line for line in f if not line.startswith("#"))
         return {
