@@ -1,28 +1,28 @@
-"""Saved solve programs: a later process skips tracing, lowering and compiling.
+"""Saved solve programs: a later process skips tracing as well as compiling.
 
 JAX's persistent compilation cache (`enable_compilation_cache`) saves the XLA
-compilation of a solve, but every new process still traces the solve in Python
-and lowers it to find the cache entry, which costs more than the run itself for
-a small scene (measured: docs/performance.md, "Compile time"). With a program
-folder set, `simulate` saves the compiled solve once
-(`jax.experimental.serialize_executable`) and later processes load the
-executable and run it: no tracing, no lowering, no compilation.
+compilation of a solve, but every new process still traces the solve in Python,
+which costs more than the run itself for a small scene (measured:
+docs/performance.md, "Compile time").
+With a program folder set, `simulate` exports the traced solve once
+(`jax.export`) and later processes load it and run it without tracing; the
+program's compilation comes from the compilation cache as before.
 
-A saved program is keyed by everything that decides the compiled program: the
+A saved program is keyed by everything that decides the traced program: the
 function's module and name (a function whose result depends on its arguments
 alone, as jaxstring's are; a lambda is not saved), the repr of the arguments'
 (scene's, solver settings') non-array parts, the structure,
 shapes and dtypes of their arrays, the versions of jax, jaxlib, diffrax and
-equinox, a digest of jaxstring's own source, the compiler options and
-`XLA_FLAGS`, and the host's processor (an executable is machine code for the
-processor it was compiled on). A scene whose non-array parts
+equinox, and a digest of jaxstring's own source. A scene whose non-array parts
 have no stable repr (a Python function among them) is not saved, nor a solve
-with host callbacks (a progress meter; an equinox runtime check, which
-jaxstring's default solves do not hold). A program that cannot be read back is
-compiled again and rewritten.
+with host callbacks (a progress meter; an equinox runtime check, which jaxstring's
+default solves do not hold). A program that cannot be read back is traced again
+and rewritten.
 
-The executable is stored with `pickle`; a loaded program serves forward solves
-only (it cannot be differentiated: gradients go through `jax.jit`).
+The program is stored with `pickle` (jax's own serialisation needs the optional
+`flatbuffers` package): the exported function's private `_get_vjp` field, which
+cannot be pickled and is only needed to differentiate the loaded program, is
+dropped, so loaded programs serve forward solves only.
 """
 
 import dataclasses
@@ -31,13 +31,11 @@ import hashlib
 import os
 import pathlib
 import pickle
-import platform
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
-from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
 from ._config import program_folder, set_program_folder as set_program_folder
 from ._jit import CPU_COMPILER_OPTIONS, compile_notice
@@ -51,24 +49,6 @@ def source_digest() -> str:
     for f in sorted(root.rglob("*.py")):
         h.update(str(f.relative_to(root)).encode())
         h.update(f.read_bytes())
-    return h.hexdigest()
-
-
-@functools.cache
-def host_digest() -> str:
-    """A digest of the host's processor: its architecture and, on Linux, its
-    model and instruction-set flags (a saved executable may use any of them)."""
-    h = hashlib.sha256(platform.machine().encode())
-    try:
-        info = pathlib.Path("/proc/cpuinfo").read_text()
-    except OSError:
-        info = platform.processor()
-    seen = set()  # the first processor's lines
-    for line in info.splitlines():
-        name = line.split(":")[0].strip()
-        if name in ("model name", "flags", "Features", "CPU part") and name not in seen:
-            seen.add(name)
-            h.update(line.encode())
     return h.hexdigest()
 
 
@@ -147,8 +127,6 @@ def _full_key(fn, static, treedef, leaves) -> str | None:
         eqx.__version__,
         source_digest(),
         repr(CPU_COMPILER_OPTIONS),
-        os.environ.get("XLA_FLAGS", ""),
-        host_digest(),
     ):
         h.update(part.encode())
         h.update(b"\0")
@@ -184,11 +162,11 @@ def call(fn, *args):
         return None
     with compile_notice(fn.__name__.lstrip("_").removesuffix("_fields")):
         if key not in _LOADED:
-            program = _load_or_compile(fn, key, static, treedef, leaves)
-            if program is None:
+            exported = _load_or_export(fn, key, static, treedef, leaves)
+            if exported is None:
                 _REFUSED.add(key)
                 return None
-            _LOADED[key] = program
+            _LOADED[key] = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
         return _LOADED[key](*leaves)
 
 
@@ -200,43 +178,28 @@ def call_or_jit(fn, jitted, *args):
     return jitted(*args) if out is None else out
 
 
-@functools.cache
-def _load_lapack():
-    """Make XLA:CPU's LAPACK kernels (the LU of the Newton matrices) callable in
-    this process. JAX loads them when it lowers a LAPACK call; a loaded
-    executable is never lowered, and its LAPACK calls would find no kernel (a
-    segmentation fault), so a tiny LU is lowered first (milliseconds, once)."""
-    import jax.scipy.linalg as jsl
-
-    jax.jit(jsl.lu_factor).lower(jax.ShapeDtypeStruct((2, 2), jax.numpy.float64))
-
-
-def _load_or_compile(fn, key, static, treedef, leaves):
-    """The compiled program of `fn` for these arguments: read from the program
-    folder, else compiled and saved there; None where it holds host callbacks
-    (its executable cannot be saved)."""
+def _load_or_export(fn, key, static, treedef, leaves):
     path = pathlib.Path(program_folder()) / f"{key}.program"
     if path.exists():
         try:
-            _load_lapack()
-            return deserialize_and_load(*pickle.loads(path.read_bytes()))
-        except Exception:  # unreadable or written by another version: compile again
+            return pickle.loads(path.read_bytes())
+        except Exception:  # unreadable or written by another version: trace again
             pass
 
     def flat(*xs):
         return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
 
     avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
-    jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
-    compiled = jitted.lower(*avals).compile()
     try:
-        data = pickle.dumps(serialize(compiled))
-    except (pickle.PicklingError, TypeError, AttributeError, ValueError):
-        return None  # host callbacks: the caller runs `fn` its own way
+        jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
+        exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
+    except (NotImplementedError, ValueError):  # host callbacks cannot be exported
+        return None
     try:
+        data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_bytes(data)
         os.replace(tmp, path)
-    except OSError:
-        pass  # not saved: this process still runs the program it compiled
-    return compiled
+    except (OSError, pickle.PicklingError, TypeError, AttributeError):
+        pass  # not saved: this process still runs the program it traced
+    return exported

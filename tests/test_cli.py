@@ -71,12 +71,12 @@ def test_command_caches_the_compiled_solve(tmp_path):
     cmd = [exe, *FAST, "--out", str(tmp_path / "out")]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    solves = sorted(f for f in os.listdir(cache) if f.startswith("jit_flat"))
+    solves = sorted(f for f in os.listdir(cache) if f.startswith("jit_call"))
     assert solves, sorted(os.listdir(cache))
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0, second.stderr
     # Nothing new to compile: the same entries, and the same result.
-    assert sorted(f for f in os.listdir(cache) if f.startswith("jit_flat")) == solves
+    assert sorted(f for f in os.listdir(cache) if f.startswith("jit_call")) == solves
     # ... and the traced solve was saved, so the second process did not trace it.
     assert [f for f in os.listdir(cache / "programs") if f.endswith(".program")]
     end = [ln for ln in first.stdout.splitlines() if ln.startswith("end mass")]
