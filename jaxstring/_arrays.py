@@ -53,12 +53,16 @@ def host_op(op, *arrays):
     if not all(on_host(a) for a in arrays):
         return op(jnp, *arrays)
     out = op(np, *(np.asarray(a) for a in arrays))
-    # on the device of the first JAX array among the inputs (`jnp.asarray` would
-    # compile a small program of its own; `device_put` copies)
-    device = next(
+    return jax.device_put(out, _first_device(arrays))
+
+
+def _first_device(arrays):
+    """The device of the first JAX array among `arrays` (None: JAX's default),
+    where host results go back (`jnp.asarray` would compile a small program of
+    its own; `device_put` copies)."""
+    return next(
         (next(iter(a.devices())) for a in arrays if isinstance(a, jax.Array)), None
     )
-    return jax.device_put(out, device)
 
 
 def host_map(op, tree):
@@ -69,7 +73,6 @@ def host_map(op, tree):
     if not all(on_host(x) for x in leaves):
         return jax.tree_util.tree_unflatten(treedef, [op(jnp, x) for x in leaves])
     out = [op(np, np.asarray(x)) for x in leaves]
-    device = next(
-        (next(iter(x.devices())) for x in leaves if isinstance(x, jax.Array)), None
+    return jax.tree_util.tree_unflatten(
+        treedef, jax.device_put(out, _first_device(leaves))
     )
-    return jax.tree_util.tree_unflatten(treedef, jax.device_put(out, device))

@@ -125,13 +125,14 @@ def options_of(func, where: str, options: dict, skip: int = 1) -> dict:
     import inspect
 
     params = list(inspect.signature(func).parameters.values())[skip:]
-    valid = {q.name: q.default for q in params}
-    unknown = sorted(set(options) - set(valid))
+    unknown = sorted(set(options) - {q.name for q in params})
     if unknown:
         raise ValueError(
-            f"`{where}`: unknown option(s) {unknown}; valid: {sorted(valid)}."
+            f"`{where}`: unknown option(s) {unknown}; valid: "
+            f"{sorted(q.name for q in params)}."
         )
-    return {**valid, **options}
+    defaults = {q.name: q.default for q in params if q.default is not q.empty}
+    return {**defaults, **options}
 
 
 def same_signature(func, like, skip: int = 1):
