@@ -23,6 +23,7 @@ Standard library only (``stale.py`` and the tests import it without JAX).
 
 import ast
 import datetime
+import functools
 import hashlib
 import os
 import pathlib
@@ -76,10 +77,12 @@ def _strip_docstrings(tree):
     return tree
 
 
+@functools.lru_cache(maxsize=4096)
 def source_fingerprint(data: bytes, name: str) -> str:
     """Hash of one file's content: for a Python module, of its syntax tree without
     docstrings (comments, blank lines and formatting do not count); for any other
-    file, or a module that does not parse, of its bytes."""
+    file, or a module that does not parse, of its bytes. Kept per content: the
+    studies share most of their files."""
     if name.endswith(".py"):
         try:
             tree = _strip_docstrings(ast.parse(data, filename=name))

@@ -57,6 +57,9 @@ def _quaternion(R):
     return np.concatenate([[w], v / (4 * w)])
 
 
+# Slow: a free body's rigid-body dynamics are checked in the default run by the
+# spinning body (angular momentum, energy) and by MoorDyn's body-drag case.
+@pytest.mark.slow
 def test_excentric_body_orbits():
     """MoorDyn's excentric-body test: each body starts with its reference point
     moving at (0, 0, 2) m/s and turning at 0.2 rad/s about x, so that its mass
