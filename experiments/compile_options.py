@@ -6,10 +6,13 @@ variables, k = 40, Kvaerno5 with a Jacobian per stage), natural variables (eps, 
 with the written-out Kvaerno5, the displacement string with BDF, (eps, phi) with
 Rodas5P; 2 s, rtol = atol = 1e-6 -- and each option set, in a fresh process (no
 compilation cache): the XLA compilation alone (`lower(...).compile()`, tracing
-apart) and the best of three runs of the compiled solve. Options are passed per
-compilation, on top of jaxstring's own (`jaxstring._jit.CPU_COMPILER_OPTIONS`).
+apart) and the best of three runs of the compiled solve; the median over
+`--rounds` interleaved rounds (every option set once per round). Options are
+passed per compilation, on top of jaxstring's own
+(`jaxstring._jit.CPU_COMPILER_OPTIONS`; the row "XLA's fusion emitters" turns
+XLA:CPU's MLIR fusion emitters back on, as without jaxstring's option).
 
-Run: ``python experiments/compile_options.py [--quick]``. Writes
+Run: ``python experiments/compile_options.py [--quick] [--rounds N]``. Writes
 results/compile_options.{md,csv}.
 """
 
@@ -17,17 +20,14 @@ import argparse
 import json
 
 import _common as common
+import numpy as np
 
 
 OPTIONS = {
     "jaxstring default": {},
-    "backend opt level 0": {"xla_backend_optimization_level": 0},
+    "XLA's fusion emitters": {"xla_cpu_use_fusion_emitters": True},
     "backend opt level 1": {"xla_backend_optimization_level": 1},
     "no expensive LLVM passes": {"xla_llvm_disable_expensive_passes": True},
-    "opt 1 + no expensive passes": {
-        "xla_backend_optimization_level": 1,
-        "xla_llvm_disable_expensive_passes": True,
-    },
 }
 
 PROGRAMS = {
@@ -66,31 +66,46 @@ print(json.dumps(dict(trace_s=trace_s, compile_s=compile_s, run_s=min(runs),
 """
 
 
-def main(quick=False):
+def main(quick=False, rounds=3):
     common.set_quick(quick)
     k = 10 if quick else 40
+    rounds = 1 if quick else rounds
     programs = list(PROGRAMS)[:1] if quick else list(PROGRAMS)
     options = list(OPTIONS)[:2] if quick else list(OPTIONS)
+    runs = {}
+    for _ in range(rounds):
+        for prog in programs:
+            formulation, solver = PROGRAMS[prog]
+            for name in options:
+                r = common.child_json(
+                    _CHILD,
+                    formulation,
+                    solver,
+                    k,
+                    json.dumps(OPTIONS[name]),
+                    env={"JAXSTRING_CACHE": "off"},
+                )
+                print(prog, name, r, flush=True)
+                runs.setdefault((prog, name), []).append(r)
+
+    def median(prog, name, field):
+        return float(np.median([r[field] for r in runs[prog, name]]))
+
     rows = []
     for prog in programs:
-        formulation, solver = PROGRAMS[prog]
-        base = None
+        base = {f: median(prog, options[0], f) for f in ("compile_s", "run_s")}
         for name in options:
-            r = common.child_json(
-                _CHILD, formulation, solver, k, json.dumps(OPTIONS[name])
-            )
-            base = base or r
             row = dict(
                 program=prog,
                 options=name,
-                compile_s=r["compile_s"],
-                run_s=r["run_s"],
-                trace_s=r["trace_s"],
-                compile_vs_default=r["compile_s"] / base["compile_s"],
-                run_vs_default=r["run_s"] / base["run_s"],
-                steps=r["steps"],
+                compile_s=median(prog, name, "compile_s"),
+                run_s=median(prog, name, "run_s"),
+                trace_s=median(prog, name, "trace_s"),
+                steps=runs[prog, name][0]["steps"],
+                rounds=len(runs[prog, name]),
             )
-            print(row, flush=True)
+            row["compile_vs_default"] = row["compile_s"] / base["compile_s"]
+            row["run_vs_default"] = row["run_s"] / base["run_s"]
             rows.append(row)
     common.write_table(
         "compile_options",
@@ -98,10 +113,11 @@ def main(quick=False):
         list(rows[0]),
         f"XLA:CPU compile options: compile and run time of simulate's solve (k = {k})",
         [
-            "Each row a fresh process without compilation cache; compile_s: XLA's "
-            "compilation of the lowered solve (tracing apart, trace_s); run_s: best "
-            "of three runs of the compiled solve; ratios against the row "
-            "'jaxstring default' of the same program.",
+            "Each value the median over `rounds` interleaved rounds, each a fresh "
+            "process without compilation cache; compile_s: XLA's compilation of the "
+            "lowered solve (tracing apart, trace_s); run_s: best of three runs of "
+            "the compiled solve; ratios against the row 'jaxstring default' of the "
+            "same program.",
         ],
     )
     return rows
@@ -110,4 +126,6 @@ def main(quick=False):
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
-    main(quick=p.parse_args().quick)
+    p.add_argument("--rounds", type=int, default=3)
+    a = p.parse_args()
+    main(quick=a.quick, rounds=a.rounds)

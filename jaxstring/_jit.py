@@ -1,14 +1,20 @@
-"""`cpu_jit`: jaxstring's repeated compiled solves, without XLA:CPU's YNNPACK fusions.
+"""`cpu_jit`: jaxstring's compiled solves, with XLA:CPU options chosen for them.
 
-jaxlib 0.10 hands some fusions to YNNPACK by default. In a string solve these are
-small reductions over 2-4 components with a batch in front (the colour-batched JVPs
-of the banded Jacobian; the members of a vmapped sweep), which YNNPACK runs several
-times slower than XLA's own loop fusions (measured: docs/numerics.md, "BLAS and XLA
-notes", and `experiments/results/ynn_fusion.md`).
+Two per-compilation options (the user's own JAX code keeps XLA's defaults), on CPU:
 
-So `simulate`, `fit` and `sweep` compile with the option
-``xla_cpu_experimental_ynn_fusion_type = ""`` on CPU. It is a per-compilation
-option: the user's own JAX code keeps XLA's defaults.
+- ``xla_cpu_experimental_ynn_fusion_type = ""``: no YNNPACK fusions. jaxlib 0.10
+  hands some fusions to YNNPACK by default. In a string solve these are small
+  reductions over 2-4 components with a batch in front (the colour-batched JVPs of
+  the banded Jacobian; the members of a vmapped sweep), which YNNPACK runs several
+  times slower than XLA's own loop fusions (docs/numerics.md, "BLAS and XLA notes";
+  `experiments/results/ynn_fusion.md`).
+- ``xla_cpu_use_fusion_emitters = False``: XLA's elemental emitter in place of its
+  MLIR fusion emitters. A solve is many small fusions, and the MLIR emitters' fixed
+  cost per fusion made most of its compilation time; the run time is the same
+  (docs/numerics.md; `experiments/results/compile_options.md`).
+
+`simulate`, `fit`, `sweep` and the statics compile with them. Both are options of
+the jaxlib versions in jaxstring's tested range (XLA refuses an unknown option).
 """
 
 import contextlib
@@ -24,7 +30,10 @@ import jax.tree_util as jtu
 from ._config import ensure_compilation_cache
 
 
-CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+CPU_COMPILER_OPTIONS = {
+    "xla_cpu_experimental_ynn_fusion_type": "",
+    "xla_cpu_use_fusion_emitters": False,
+}
 
 NOTICE_AFTER_S = 3.0
 """A compiled call still preparing its program after this long says so on stderr."""

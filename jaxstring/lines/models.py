@@ -42,6 +42,7 @@ from .._arrays import FloatScalar, dot as _dot, host_op, param as _param
 from .._blas import single_blas_thread
 from .._environment import Environment
 from .._geometry import safe_norm
+from .._jit import cpu_jit
 from .._model import AbstractModel, SolverStructure
 from .._validate import (
     check_choice,
@@ -1538,7 +1539,7 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
 
 # The start's geometry in one compiled call: op by op, the motion tables'
 # interpolation alone compiled some fifty one-operation programs.
-@eqx.filter_jit
+@cpu_jit
 def _start_geometry(model: LineNetwork, t0):
     """Held points' positions, rod ends and points on bodies, unstretched
     lengths at `t0`."""
@@ -1552,7 +1553,7 @@ def _start_geometry(model: LineNetwork, t0):
     return hp, ends, model.unstretched_lengths(t0)[0]
 
 
-@eqx.filter_jit
+@cpu_jit
 def _with_rigid_rows(model: LineNetwork, y):
     return model.initial_rigid_rows(y)
 
@@ -1663,7 +1664,7 @@ def _solve_equilibrium_body(x0, model, effects, env, t0, solve_rows, max_iter, t
     return x, res, it, ftol
 
 
-_solve_equilibrium = eqx.filter_jit(_solve_equilibrium_body)
+_solve_equilibrium = cpu_jit(_solve_equilibrium_body)
 
 
 @single_blas_thread

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._environment import Environment
+from .._jit import cpu_jit
 from .._scene import Scene
 from .._validate import options_of, same_signature
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
@@ -1069,7 +1070,7 @@ def read_moordyn(path, **options) -> Scene:
 same_signature(read_moordyn, deck_scene)
 
 
-@eqx.filter_jit
+@cpu_jit
 def _rest_observables(scene):
     model = scene.model
     y = scene.y0.at[:, 3:].set(0.0)

@@ -71,6 +71,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import BoolScalar, FloatScalar, IntScalar, f64, param as _param
+from .._jit import cpu_jit
 from .._validate import (
     check_choice,
     check_int,
@@ -1041,13 +1042,13 @@ def _equilibrium_core(system, loads, offsets, guess, cfg: _Cfg):
     return out, K
 
 
-@eqx.filter_jit
+@cpu_jit
 def _equilibrium(system, loads, offsets, guess, cfg):
     out = _equilibrium_core(system, loads, offsets, guess, cfg)[0]
     return _throw(out) if cfg.throw else out
 
 
-@eqx.filter_jit
+@cpu_jit
 def _stiffness(system, loads, offsets, guess, cfg):
     out, K = _equilibrium_core(system, loads, offsets, guess, cfg)
     if cfg.throw:

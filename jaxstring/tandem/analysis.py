@@ -30,6 +30,7 @@ import optimistix as optx
 from .. import _programs
 from .._arrays import host_op
 from .._blas import single_blas_thread
+from .._jit import cpu_jit
 from .._scene import Scene
 from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
 
@@ -101,7 +102,7 @@ def _solve_batch_body(scene, q0s, rtol, atol, max_steps, method="newton"):
     return q, ok, res
 
 
-_solve_batch = eqx.filter_jit(_solve_batch_body)
+_solve_batch = cpu_jit(_solve_batch_body)
 
 
 def solve_equilibria(
@@ -144,7 +145,7 @@ def tandem_start(model: Tandem, l0, psi1, psi2):
     return jnp.concatenate([p1, psi1[None], z, p2, psi2[None], z])
 
 
-@eqx.filter_jit
+@cpu_jit
 def _jacobian(scene, y):
     return jax.jacfwd(lambda y: scene.vector_field(0.0, y))(y)
 
@@ -261,7 +262,7 @@ def _equilibria_map_body(scenes, n_grid, rtol, atol, max_steps, method):
     return eqx.filter_vmap(one)(scenes)
 
 
-_equilibria_map = eqx.filter_jit(_equilibria_map_body)
+_equilibria_map = cpu_jit(_equilibria_map_body)
 
 
 def _collect(ys, ok, T, clr, J, taut_tension):

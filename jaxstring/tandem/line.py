@@ -27,12 +27,11 @@ the line's mass and drag are a model mismatch the controller has to reject.
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._jit import eager_jit
+from .._jit import cpu_jit, eager_jit
 from .._model import AbstractModel
 from .._validate import check_finite, check_int, check_positive
 from ..chain import (
@@ -313,7 +312,7 @@ def _equilibrium_residual(y, scene):
     return scene.vector_field(0.0, y)
 
 
-@eqx.filter_jit
+@cpu_jit
 def _root(fn, y0, args, max_steps, tol):
     # module-level residuals and one jitted solve: repeated calls with the same
     # structure (N, effects) reuse the compiled solve

@@ -36,6 +36,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import FloatScalar
+from .._jit import cpu_jit
 from .._model import AbstractModel, SolverStructure
 from .._validate import check_nonnegative
 from ..chain import AbstractEnd, EndKinematics
@@ -125,7 +126,12 @@ class TurretLines(AbstractVesselLoad):
                                  jnp.asarray(heading, jnp.float64))  # fmt: skip
 
 
-@eqx.filter_jit
+@cpu_jit
+def _restoring_forces(lines: TurretLines, P):
+    return jax.vmap(lines.restoring_force)(P)
+
+
+@cpu_jit
 def _offset_for_force(lines: TurretLines, F, heading):
     e = jnp.stack([jnp.cos(heading), jnp.sin(heading)])
 
@@ -192,9 +198,8 @@ def offset_force_curve(mooring, offsets, heading=0.0):
             "`mooring` must be a TurretLines or a TurretMooring; got "
             f"{type(mooring).__name__}."
         )
-    f = eqx.filter_jit(lambda m, P: jax.vmap(m.restoring_force)(P))
     P = -offsets[:, None] * e[None, :]
-    F = np.asarray(f(mooring, jnp.asarray(P)))
+    F = np.asarray(_restoring_forces(mooring, jnp.asarray(P)))
     return F @ e
 
 
