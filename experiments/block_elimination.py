@@ -107,7 +107,7 @@ def _kernel(N, B, code):
 
         return lax.fori_loop(0, REPS, body, jnp.zeros_like(f)) / REPS
 
-    jitted = jax.jit(loop, compiler_options=_jit.CPU_COMPILER_OPTIONS)
+    jitted = jax.jit(loop, compiler_options=_jit.cpu_compiler_options())
     try:
         t0 = time.perf_counter()
         compiled = jitted.lower(mat, f).compile()

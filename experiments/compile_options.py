@@ -51,7 +51,7 @@ t0 = time.perf_counter()
 lowered = _integrate.jit_solve.lower_cpu(scene, config, ts)
 trace_s = time.perf_counter() - t0
 t0 = time.perf_counter()
-compiled = lowered.compile(_jit.CPU_COMPILER_OPTIONS | options)
+compiled = lowered.compile(_jit.cpu_compiler_options() | options)
 compile_s = time.perf_counter() - t0
 import equinox as eqx
 dynamic, static = eqx.partition(((scene, config, ts), ()), eqx.is_array)

@@ -39,7 +39,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from . import _worker
-from ._jit import CPU_COMPILER_OPTIONS
+from ._jit import cpu_compiler_options
 from ._validate import check_int
 
 
@@ -115,7 +115,7 @@ def export_chunk(fn, args):
         cache_key = None
     if cache_key is not None and cache_key in _EXPORTED:
         return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
-    jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
+    jitted = jax.jit(flat, compiler_options=cpu_compiler_options())
     exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
     # The private `_get_vjp` (a closure, not picklable) serves differentiation of
     # the loaded program only, which a sweep does not do.

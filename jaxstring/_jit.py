@@ -13,8 +13,9 @@ Two per-compilation options (the user's own JAX code keeps XLA's defaults), on C
   cost per fusion made most of its compilation time; the run time is the same
   (docs/numerics.md; `experiments/results/compile_options.md`).
 
-`simulate`, `fit`, `sweep` and the statics compile with them. Both are options of
-the jaxlib versions in jaxstring's tested range (XLA refuses an unknown option).
+`simulate`, `fit`, `sweep` and the statics compile with them
+(`cpu_compiler_options`: those of them that this jaxlib's XLA knows, checked once
+per process on a one-operation program; XLA refuses an unknown option).
 """
 
 import contextlib
@@ -26,6 +27,7 @@ import types
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
+import numpy as np
 
 from ._config import ensure_compilation_cache
 
@@ -34,6 +36,26 @@ CPU_COMPILER_OPTIONS = {
     "xla_cpu_experimental_ynn_fusion_type": "",
     "xla_cpu_use_fusion_emitters": False,
 }
+
+
+@functools.cache
+def cpu_compiler_options() -> dict:
+    """`CPU_COMPILER_OPTIONS` less any option this jaxlib's XLA does not know (a
+    newer jaxlib may drop one): each is tried once per process, compiling a
+    one-operation program on the CPU."""
+    cpu = jax.local_devices(backend="cpu")[0]
+    lowered = jax.jit(lambda x: x + 1.0).lower(
+        jax.device_put(np.zeros((), np.float64), cpu)
+    )
+    known = {}
+    for name, value in CPU_COMPILER_OPTIONS.items():
+        try:
+            lowered.compile({name: value})
+        except Exception:  # noqa: BLE001  (XLA: "No such compile option")
+            continue
+        known[name] = value
+    return known
+
 
 NOTICE_AFTER_S = 3.0
 """A compiled call still preparing its program after this long says so on stderr."""
@@ -136,10 +158,15 @@ def cpu_jit(fun):
         )
         return dynamic, _code_keyed(static)
 
-    jitted = {
-        True: jax.jit(call, static_argnums=1, compiler_options=CPU_COMPILER_OPTIONS),
-        False: jax.jit(call, static_argnums=1),
-    }
+    jitted = {False: jax.jit(call, static_argnums=1)}
+
+    def cpu_jitted():
+        # made at the first call, not at import: the options are checked then
+        if True not in jitted:
+            jitted[True] = jax.jit(
+                call, static_argnums=1, compiler_options=cpu_compiler_options()
+            )
+        return jitted[True]
 
     name = getattr(fun, "__name__", "a solve").lstrip("_")
 
@@ -154,13 +181,14 @@ def cpu_jit(fun):
         on_cpu = not traced and all(
             d.platform == "cpu" for x in leaves for d in x.devices()
         )
+        jit = cpu_jitted() if on_cpu else jitted[False]
         if traced:
-            return jitted[on_cpu](dynamic, static)
+            return jit(dynamic, static)
         with compile_notice(name):
-            return jitted[on_cpu](dynamic, static)
+            return jit(dynamic, static)
 
     # The CPU compilation, for inspection: `fn.lower_cpu(*args).compile().as_text()`.
-    wrapper.lower_cpu = lambda *args, **kwargs: jitted[True].lower(*split(args, kwargs))
+    wrapper.lower_cpu = lambda *args, **kwargs: cpu_jitted().lower(*split(args, kwargs))
     # Compiled variants so far (tests check that new parameter values reuse one).
     wrapper.cache_size = lambda: sum(j._cache_size() for j in jitted.values())
     return wrapper

@@ -38,7 +38,7 @@ import jax
 import jax.tree_util as jtu
 
 from ._config import program_folder, set_program_folder as set_program_folder
-from ._jit import CPU_COMPILER_OPTIONS, compile_notice
+from ._jit import compile_notice, cpu_compiler_options
 
 
 @functools.cache
@@ -126,7 +126,7 @@ def _full_key(fn, static, treedef, leaves) -> str | None:
         dfx.__version__,
         eqx.__version__,
         source_digest(),
-        repr(CPU_COMPILER_OPTIONS),
+        repr(cpu_compiler_options()),
     ):
         h.update(part.encode())
         h.update(b"\0")
@@ -166,7 +166,9 @@ def call(fn, *args):
             if exported is None:
                 _REFUSED.add(key)
                 return None
-            _LOADED[key] = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
+            _LOADED[key] = jax.jit(
+                exported.call, compiler_options=cpu_compiler_options()
+            )
         return _LOADED[key](*leaves)
 
 
@@ -191,7 +193,7 @@ def _load_or_export(fn, key, static, treedef, leaves):
 
     avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
     try:
-        jitted = jax.jit(flat, compiler_options=CPU_COMPILER_OPTIONS)
+        jitted = jax.jit(flat, compiler_options=cpu_compiler_options())
         exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
     except (NotImplementedError, ValueError):  # host callbacks cannot be exported
         return None

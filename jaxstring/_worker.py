@@ -54,12 +54,12 @@ def run(key: str, program: bytes, leaves: list):
     arrays); its outputs as NumPy arrays."""
     import jax
 
-    from ._jit import CPU_COMPILER_OPTIONS
+    from ._jit import cpu_compiler_options
 
     jax.config.update("jax_enable_x64", True)
     compiled = _COMPILED.get(key)
     if compiled is None:
         exported = pickle.loads(program)
-        compiled = jax.jit(exported.call, compiler_options=CPU_COMPILER_OPTIONS)
+        compiled = jax.jit(exported.call, compiler_options=cpu_compiler_options())
         _COMPILED[key] = compiled
     return jax.device_get(compiled(*leaves))

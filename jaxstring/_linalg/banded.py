@@ -57,7 +57,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array
 
-from .._jit import CPU_COMPILER_OPTIONS
+from .._jit import cpu_compiler_options
 from .._scene import Scene, scene_vector_field
 
 
@@ -166,7 +166,7 @@ def detect_width(fn, y, args=None, max_width: int = 4):
         # compile-time evaluation, each step on the probe's constant index arrays
         # would run (and compile) eagerly, one small program each.
         probe = jax.jit(lambda u, a, v: _band_probe(call, W, u, a, v))
-        options = CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
+        options = cpu_compiler_options() if jax.default_backend() == "cpu" else None
         compiled = probe.lower(*inputs[0]).compile(options)
         used = np.zeros(2 * W + 1, bool)
         width = None

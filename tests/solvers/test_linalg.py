@@ -247,6 +247,26 @@ def test_ynnpack_fusions_are_off_in_jaxstrings_compilations():
         pytest.skip("this jaxlib makes no YNNPACK fusion here anyway")
 
 
+def test_compile_options_this_xla_does_not_know_are_left_out(monkeypatch):
+    # jaxstring's per-compilation options are checked against the running XLA
+    # once per process: one it does not know is left out (a solve still compiles
+    # and runs), the ones it knows are kept as they are.
+    from jaxstring import _jit
+
+    known = _jit.cpu_compiler_options()
+    assert known == _jit.CPU_COMPILER_OPTIONS  # every option known to this jaxlib
+    unknown = {"xla_cpu_no_such_option_here": True}
+    monkeypatch.setattr(_jit, "CPU_COMPILER_OPTIONS", known | unknown)
+    _jit.cpu_compiler_options.cache_clear()
+    try:
+        assert _jit.cpu_compiler_options() == known
+        f = _jit.cpu_jit(lambda x: jnp.sum(x * x))
+        assert float(f(jnp.arange(4.0))) == 14.0
+    finally:
+        monkeypatch.undo()
+        _jit.cpu_compiler_options.cache_clear()
+
+
 # ---------------------------------------------------------------------------
 # The displacement string's own element-wise Jacobian (`vf_jacobian`)
 # ---------------------------------------------------------------------------
