@@ -47,6 +47,11 @@ def cpu_compiler_options() -> dict:
     lowered = jax.jit(lambda x: x + 1.0).lower(
         jax.device_put(np.zeros((), np.float64), cpu)
     )
+    try:
+        lowered.compile(dict(CPU_COMPILER_OPTIONS))
+        return dict(CPU_COMPILER_OPTIONS)
+    except Exception:  # noqa: BLE001  (one of them unknown: try each)
+        pass
     known = {}
     for name, value in CPU_COMPILER_OPTIONS.items():
         try:
