@@ -564,6 +564,7 @@ STUDIES = (
                     "tether_fixed.png",
                     "tether_winch.png",
                     "tether_sharp_bend.csv",
+                    "tether_winch_joins.csv",
                 ),
             ),
         ),

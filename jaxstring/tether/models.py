@@ -83,6 +83,10 @@ from ..chain import (
 # back on the drum long before it is paid out again.
 _DRUM_RELAXATION = 0.05
 
+# ExactTether with a rigid root: the partial link's element leaves the computation
+# when its link is this fraction of L_link long (and joins it at that length).
+_JOIN_FRACTION = 0.02
+
 
 # ---------------------------------------------------------------------------
 # Tension solvers
@@ -243,9 +247,12 @@ class AbstractTether(AbstractModel):
         `env.rho_water`), kg."""
         return self.element_mass + self.added_mass * env.rho_water * self.element_volume
 
-    @abc.abstractmethod
-    def _root_rigid(self) -> bool:
-        """Whether the root link is a rigid constraint (else a spring)."""
+    # Pay-out and haul-in. 0: the paper's scheme (section 4.5): the partial link
+    # shrinks to zero length, and the element before it sits at the mount on a
+    # zero-length root link. phi > 0: the partial link is the root link, its target
+    # within (phi, 1 + phi] L_link; its element leaves the computation when the
+    # link is phi L_link long (hauling in) and joins it at that length (paying out).
+    _join_fraction: ClassVar[float] = 0.0
 
     @abc.abstractmethod
     def _tensions(self, ch: _Chain) -> Array:
@@ -280,17 +287,21 @@ class AbstractTether(AbstractModel):
             g = jnp.where(exists, L_link, 0.0)
             zeros = jnp.zeros(self.N + 1)
             return g, zeros, zeros, jnp.zeros((), jnp.int32), L_r, L_c_dot
+        # The partly released link q has target raw_q in (phi, 1 + phi] L_link,
+        # phi = `_join_fraction`: links j < q are on the drum, links j > q full.
+        phi = self._join_fraction
+        q = jnp.clip(jnp.floor(L_c / L_link + phi).astype(jnp.int32), 0, self.N - 1)
         raw = L_link * (j + 1) - L_c
-        g = jnp.where(exists, jnp.clip(raw, 0.0, L_link), 0.0)
-        partial = (raw > 0) & (raw < L_link) & exists
+        partial = (j == q) & exists
+        g = jnp.where(j < q, 0.0, jnp.where(partial, raw, L_link))
+        g = jnp.where(exists, g, 0.0)
         gdot = jnp.where(partial, -L_c_dot, 0.0)
         gddot = jnp.where(partial, -L_c_ddot, 0.0)
-        q = jnp.clip(jnp.floor(L_c / L_link).astype(jnp.int32), 0, self.N - 1)
-        # Rigid root: the partly released link q joins the mount to element q, and
-        # elements < q are on the drum. Spring root (the paper): the element q - 1
-        # sits at the mount on a zero-length proportional link, the partial link q
-        # is regulated, elements < q - 1 are on the drum.
-        r = q if self._root_rigid() else jnp.maximum(q - 1, 0)
+        # phi > 0: the partial link q joins the mount to element q, and elements
+        # < q are on the drum. phi = 0 (the paper): the element q - 1 sits at the
+        # mount on a zero-length proportional link, the partial link q is
+        # regulated, elements < q - 1 are on the drum.
+        r = q if self._join_fraction else jnp.maximum(q - 1, 0)
         return g, gdot, gddot, r, L_r, -L_c_dot
 
     def _chain(self, t, y, effects, env, root, fast) -> _Chain:
@@ -396,15 +407,21 @@ class AbstractTether(AbstractModel):
         else:
             p, v = y[:, :3], y[:, 3:]
             rk = ch.root
-            v_drum = rk.velocity
-            if self._root_rigid():
-                # With a rigid root link the next element to be paid out leaves the
-                # drum along the cable at the pay-out speed (so that it joins the
-                # computation consistent with the constraint g' = dL_r/dt).
-                u_root = jnp.sum(self._root_onehot(ch)[:, None] * ch.u, axis=0)
-                v_drum = v_drum + jnp.maximum(ch.payout, 0.0) * u_root
-            dp_drum = rk.velocity + (rk.position - p) / _DRUM_RELAXATION
-            dv_drum = rk.acceleration + (v_drum - v) / _DRUM_RELAXATION
+            drum, v_drum, a_drum = rk.position, rk.velocity, rk.acceleration
+            if self._join_fraction:
+                # Elements on the drum follow the point one link length behind the
+                # root link's element, on the root link's line: the next element
+                # to be paid out arrives at phi L_link from the mount (plus a
+                # spring root's stretch, so that the spring keeps its tension)
+                # with the cable's velocity, on the line of the link it splits.
+                onehot = self._root_onehot(ch)
+                u_root = jnp.sum(onehot[:, None] * ch.u, axis=0)
+                at_root = onehot[: self.N, None]
+                drum = jnp.sum(at_root * ch.P, axis=0) - self.link_length * u_root
+                v_drum = jnp.sum(at_root * ch.V, axis=0)
+                a_drum = jnp.sum(at_root * acc, axis=0)
+            dp_drum = v_drum + (drum - p) / _DRUM_RELAXATION
+            dv_drum = a_drum + (v_drum - v) / _DRUM_RELAXATION
             act = ch.active[:, None]
             dy = jnp.concatenate(
                 [jnp.where(act, ch.V, dp_drum), jnp.where(act, acc, dv_drum)], axis=1
@@ -550,9 +567,6 @@ class AceamTether(AbstractTether):
         check_positive("T1", self.T1, "s")
         check_positive("k", self.k, "N")
 
-    def _root_rigid(self):
-        return False
-
     def _tensions(self, ch):
         N = self.N
         onehot = self._root_onehot(ch)
@@ -616,8 +630,9 @@ class ExactTether(AbstractTether):
                 "vessel would need the vessel's mass inside the tension system)."
             )
 
-    def _root_rigid(self):
-        return self.end_links == "rigid"
+    # The exact constraint of a link holds a 1/l (centripetal) term: the partial
+    # link never gets shorter than this fraction of L_link.
+    _join_fraction: ClassVar[float] = _JOIN_FRACTION
 
     def _tensions(self, ch):
         N = self.N
@@ -685,9 +700,6 @@ class LmsTether(AbstractTether):
     def __check_init__(self):
         check_positive("k", self.k, "N")
         check_nonnegative("c", self.c, "N s")
-
-    def _root_rigid(self):
-        return False
 
     def structure(self, effects):
         """Band 1 under jaxstring's own chain effects (each link's spring and drag
