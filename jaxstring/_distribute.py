@@ -38,7 +38,7 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
-from . import _worker
+from . import _programs, _worker
 from ._jit import cpu_compiler_options
 from ._validate import check_int
 
@@ -115,8 +115,11 @@ def export_chunk(fn, args):
         cache_key = None
     if cache_key is not None and cache_key in _EXPORTED:
         return (*_EXPORTED[cache_key][:2], leaves, _EXPORTED[cache_key][2])
-    jitted = jax.jit(flat, compiler_options=cpu_compiler_options())
-    exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
+    # A later process reads the traced program from the program folder.
+    exported = _programs.saved_export(fn, static, treedef, leaves)
+    if exported is None:
+        jitted = jax.jit(flat, compiler_options=cpu_compiler_options())
+        exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
     # The private `_get_vjp` (a closure, not picklable) serves differentiation of
     # the loaded program only, which a sweep does not do.
     data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
@@ -263,13 +266,13 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
     parts = [
         tuple(v[i * chunk : (i + 1) * chunk] for v in padded) for i in range(n_chunks)
     ]
+    own = executor is None
+    # jaxstring's workers start (import JAX) while this process traces the program.
+    pool = process_pool(workers) if own else executor
     key, program, leaves, outputs = export_chunk(fn, (parts[0],) + tuple(args[1:]))
     shared = [np.asarray(x) for x in leaves[n_vals:]]
     chunks = [[np.asarray(v) for v in p] + shared for p in parts]
-    own = executor is None
-    results = run_chunks(
-        process_pool(workers) if own else executor, key, program, chunks, own
-    )
+    results = run_chunks(pool, key, program, chunks, own)
     failed = {}
     out = []
     for i, r in enumerate(results):

@@ -199,27 +199,6 @@ def cpu_jit(fun):
     return wrapper
 
 
-def eager_jit(fun):
-    """`fun` compiled as one program (`cpu_jit`) when called on concrete arrays,
-    and traced inline when called inside another trace.
-
-    For functions that users and scene builders call outside any trace (the
-    observables of a state, an initial state): run eagerly, each of their many
-    small operations would be dispatched, and compiled, one by one (a fresh
-    process compiles every distinct operation and shape once). Python numbers
-    among the arguments are structure (a new value compiles anew): pass arrays."""
-    jitted = cpu_jit(fun)
-
-    @functools.wraps(fun)
-    def wrapper(*args, **kwargs):
-        leaves = jtu.tree_leaves((args, kwargs))
-        if any(isinstance(x, jax.core.Tracer) for x in leaves):
-            return fun(*args, **kwargs)
-        return jitted(*args, **kwargs)
-
-    return wrapper
-
-
 def traced_once(step):
     """A diffrax solver's `step` method as a nested jitted function, inlined where
     it is called, so that JAX keeps its trace.

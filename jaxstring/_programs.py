@@ -13,8 +13,10 @@ function's module and name (a function whose result depends on its arguments
 alone, as jaxstring's are; a lambda is not saved), the repr of the arguments'
 (scene's, solver settings') non-array parts, the structure,
 shapes and dtypes of their arrays, the versions of jax, jaxlib, diffrax and
-equinox, and a digest of jaxstring's own source. A scene whose non-array parts
-have no stable repr (a Python function among them) is not saved, nor a solve
+equinox, a digest of jaxstring's own source and one of the files that define any
+other class among the arguments (a model or effect of the user's own). A scene
+whose non-array parts have no stable repr (a Python function among them) or hold
+a class without a source file (defined in a notebook) is not saved, nor a solve
 with host callbacks (a progress meter; an equinox runtime check, which jaxstring's
 default solves do not hold). A program that cannot be read back is traced again
 and rewritten.
@@ -31,14 +33,19 @@ import hashlib
 import os
 import pathlib
 import pickle
+import sys
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
 
-from ._config import program_folder, set_program_folder as set_program_folder
-from ._jit import compile_notice, cpu_compiler_options
+from ._config import (
+    ensure_compilation_cache,
+    program_folder,
+    set_program_folder as set_program_folder,
+)
+from ._jit import compile_notice, cpu_compiler_options, cpu_jit
 
 
 @functools.cache
@@ -52,22 +59,51 @@ def source_digest() -> str:
     return h.hexdigest()
 
 
-def _types(x, out=None) -> str:
-    """The module-qualified type of every object in `x` (dataclass fields, static
-    ones included, lists, tuples and dict values): two classes of one name, such
-    as diffrax's Kvaerno5 and jaxstring's, print alike in a repr."""
+def _classes(x, out=None) -> list:
+    """The type of every object in `x` (dataclass fields, static ones included,
+    lists, tuples and dict values)."""
     out = [] if out is None else out
-    out.append(f"{type(x).__module__}.{type(x).__qualname__}")
+    out.append(type(x))
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
         for f in dataclasses.fields(x):
-            _types(getattr(x, f.name, None), out)
+            _classes(getattr(x, f.name, None), out)
     elif isinstance(x, (list, tuple)):
         for y in x:
-            _types(y, out)
+            _classes(y, out)
     elif isinstance(x, dict):
         for y in x.values():
-            _types(y, out)
-    return ",".join(out)
+            _classes(y, out)
+    return out
+
+
+def _types(classes) -> str:
+    """The classes, module-qualified: two classes of one name, such as diffrax's
+    Kvaerno5 and jaxstring's, print alike in a repr."""
+    return ",".join(f"{c.__module__}.{c.__qualname__}" for c in classes)
+
+
+# Packages whose code is keyed by their versions (or, jaxstring's, its digest).
+_VERSIONED = {"jaxstring", "jax", "jaxlib", "diffrax", "equinox", "lineax",
+              "optimistix", "optax", "numpy"}  # fmt: skip
+
+
+def _outside_source(classes) -> str | None:
+    """A digest of the source files that define `classes` (or functions) outside
+    jaxstring, its dependencies and the standard library (a model or an effect of
+    the user's own: a program saved before its code changed is not run after);
+    None where one has no source file (a class defined in a notebook or at the
+    prompt)."""
+    h = hashlib.sha256()
+    for name in sorted({c.__module__ for c in classes}):
+        top = name.split(".")[0]
+        if top in _VERSIONED or top in sys.stdlib_module_names:
+            continue
+        path = getattr(sys.modules.get(name), "__file__", None)
+        try:
+            h.update(name.encode() + b"\0" + pathlib.Path(path).read_bytes())
+        except (TypeError, OSError):
+            return None
+    return h.hexdigest()
 
 
 _KEYS = {}  # _memo(...) -> _key(...), in this process
@@ -107,18 +143,49 @@ def _key(fn, static, treedef, leaves) -> str | None:
     return key
 
 
+class _Named:
+    """A module-level function of jaxstring's own in a key, by its name (its
+    source is in the key's digest)."""
+
+    def __init__(self, fn):
+        self.name = f"{fn.__module__}.{fn.__qualname__}"
+
+    def __repr__(self):
+        return self.name
+
+
+def _named(x):
+    own = getattr(x, "__module__", None) or ""
+    if (
+        callable(x)
+        and hasattr(x, "__qualname__")
+        and (own == "jaxstring" or own.startswith("jaxstring."))
+        and "<" not in x.__qualname__
+    ):
+        return _Named(x)
+    return x
+
+
 def _full_key(fn, static, treedef, leaves) -> str | None:
     name = f"{fn.__module__}.{fn.__qualname__}"
     if "<lambda>" in name:  # nameless: two lambdas would share one program
         return None
+    # A function among the arguments is keyed by its name where it is one of
+    # jaxstring's (a sweep's default output); another function has no stable key.
+    static = jtu.tree_map(_named, static)
     text = repr(static)
     if " at 0x" in text:  # an object without a stable repr (a function)
+        return None
+    classes = _classes(static)
+    outside = _outside_source(classes + [fn])
+    if outside is None:
         return None
     h = hashlib.sha256()
     for part in (
         name,
         text,
-        _types(static),
+        _types(classes),
+        outside,
         str(treedef),
         str([(x.shape, str(x.dtype)) for x in leaves]),
         jax.__version__,
@@ -180,6 +247,24 @@ def call_or_jit(fn, jitted, *args):
     return jitted(*args) if out is None else out
 
 
+def saved_export(fn, static, treedef, leaves):
+    """`fn` traced and exported for arrays of the shapes and dtypes of `leaves`
+    (the arrays of its arguments; `static` and `treedef` the rest): read from the
+    program folder where an earlier process saved it, else traced and saved there.
+    None where no program folder is set, `fn` has no stable key or it cannot be
+    exported (host callbacks)."""
+    ensure_compilation_cache()
+    if program_folder() is None:
+        return None
+    key = _key(fn, static, treedef, leaves)
+    if key is None or key in _REFUSED:
+        return None
+    exported = _load_or_export(fn, key, static, treedef, leaves)
+    if exported is None:
+        _REFUSED.add(key)
+    return exported
+
+
 def _load_or_export(fn, key, static, treedef, leaves):
     path = pathlib.Path(program_folder()) / f"{key}.program"
     if path.exists():
@@ -205,3 +290,32 @@ def _load_or_export(fn, key, static, treedef, leaves):
     except (OSError, pickle.PicklingError, TypeError, AttributeError):
         pass  # not saved: this process still runs the program it traced
     return exported
+
+
+def eager_jit(fun):
+    """`fun` compiled as one program (`cpu_jit`) when called on concrete arrays,
+    and traced inline when called inside another trace.
+
+    For functions that users and scene builders call outside any trace (the
+    observables of a state, an initial state): run eagerly, each of their many
+    small operations would be dispatched, and compiled, one by one (a fresh
+    process compiles every distinct operation and shape once). Python numbers
+    among the arguments are structure (a new value compiles anew): pass arrays.
+    Called with positional arguments and a program folder set, the traced
+    program is saved there for later processes, as `simulate`'s solves are."""
+    jitted = cpu_jit(fun)
+
+    @functools.wraps(fun)
+    def wrapper(*args, **kwargs):
+        leaves = jtu.tree_leaves((args, kwargs))
+        if any(isinstance(x, jax.core.Tracer) for x in leaves):
+            return fun(*args, **kwargs)
+        # A saved program (this module): a later process skips the trace.
+        ensure_compilation_cache()
+        if not kwargs and usable(args):
+            out = call(fun, *args)
+            if out is not None:
+                return out
+        return jitted(*args, **kwargs)
+
+    return wrapper

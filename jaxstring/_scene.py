@@ -11,8 +11,8 @@ from jaxtyping import Array, Float
 from ._arrays import FloatScalar
 from ._effect import AbstractEffect
 from ._environment import Environment
-from ._jit import eager_jit
 from ._model import AbstractModel
+from ._programs import eager_jit
 from ._validate import check_finite, check_shape, is_concrete, show
 
 

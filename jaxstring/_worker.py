@@ -38,7 +38,7 @@ def init(cache_dir: str | None, cores=None, started=None) -> None:
     jax.config.update("jax_platforms", "cpu")
     if cache_dir:
         jax.config.update("jax_compilation_cache_dir", cache_dir)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 

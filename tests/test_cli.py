@@ -227,3 +227,81 @@ def test_saved_programs_of_two_functions_with_the_same_arguments_are_two(tmp_pat
         _programs.set_program_folder(None)
     assert len(list(tmp_path.glob("*.program"))) == 2
     assert jnp.array_equal(two["y"], 2.0 * x) and jnp.array_equal(three["y"], 3.0 * x)
+
+
+def test_eager_calls_are_saved_programs_that_a_later_process_reads(tmp_path):
+    # A scene builder's compiled call (`eager_jit`: here the string's initial
+    # state) is saved with the program folder set; after JAX's in-memory caches are
+    # cleared (as in a new process) it is read back, not traced, and gives the same
+    # state.
+    import jax
+
+    from jaxstring import _programs
+    from jaxstring.pendulum import scenes
+
+    traces = []
+    body = scenes._initial_state.__wrapped__
+
+    def counted(*args):
+        traces.append(1)
+        return body(*args)
+
+    scene = js.string_pendulum(k=4, t1=0.1)
+    theta0 = jnp.asarray(0.3)
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        first = scenes.eager_jit(counted)(scene.model, theta0)
+        jax.clear_caches()
+        _programs._LOADED.clear()
+        again = scenes.eager_jit(counted)(scene.model, theta0)
+    finally:
+        _programs.set_program_folder(None)
+    assert len(traces) == 1
+    assert jnp.array_equal(first, again)
+    # Nodes at rest on the line from the mount at 0.3 rad from the vertical, the
+    # last at the string's 1 m length.
+    x, y = first[:, 0], first[:, 1]
+    assert jnp.allclose(jnp.arctan2(x, -y), 0.3, rtol=0, atol=1e-14)
+    assert jnp.allclose(jnp.hypot(x, y), jnp.arange(1, 5) / 4, rtol=1e-14)
+    assert not jnp.any(first[:, 2:])
+
+
+def test_a_saved_program_of_a_users_own_class_follows_its_source(tmp_path):
+    # A model or effect of the user's own is keyed by the file that defines it: a
+    # program saved before that file changed is not run after. A class without a
+    # source file (a notebook's) is not saved at all.
+    import importlib
+    import sys
+    import types
+
+    from jaxstring import _programs
+
+    source = (
+        "import equinox as eqx\n"
+        "class Gain(eqx.Module):\n"
+        "    k: float = eqx.field(static=True)\n"
+    )
+    (tmp_path / "user_gain.py").write_text(source)
+    sys.path.insert(0, str(tmp_path))
+    try:
+        module = importlib.import_module("user_gain")
+        before = _programs._full_key(_double, (module.Gain(2.0),), None, [])
+        (tmp_path / "user_gain.py").write_text(source + "# edited\n")
+        after = _programs._full_key(_double, (module.Gain(2.0),), None, [])
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("user_gain", None)
+    notebook = types.ModuleType("notebook_cell")
+    exec(source, notebook.__dict__)
+    notebook.Gain.__module__ = "notebook_cell"
+    sys.modules["notebook_cell"] = notebook
+    try:
+        unsaved = _programs._full_key(_double, (notebook.Gain(2.0),), None, [])
+    finally:
+        sys.modules.pop("notebook_cell")
+    assert before is not None and after is not None and before != after
+    assert unsaved is None
+
+
+def _double(x):
+    return {"y": 2.0 * x}

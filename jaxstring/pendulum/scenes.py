@@ -5,7 +5,7 @@ import math
 import jax.numpy as jnp
 
 from .._environment import Environment, G
-from .._jit import eager_jit
+from .._programs import eager_jit
 from .._scene import Scene
 from .._validate import (
     check_angle,

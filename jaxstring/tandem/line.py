@@ -31,8 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._jit import cpu_jit, eager_jit
+from .._jit import cpu_jit
 from .._model import AbstractModel
+from .._programs import eager_jit
 from .._validate import check_finite, check_int, check_positive
 from ..chain import (
     AbstractChainLoad,

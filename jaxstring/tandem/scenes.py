@@ -13,7 +13,7 @@ import jax.numpy as jnp
 
 from .._arrays import host_op
 from .._environment import Environment, UniformCurrent
-from .._jit import eager_jit
+from .._programs import eager_jit
 from .._scene import Scene
 from .._validate import check_choice, check_finite, check_nonnegative, check_positive
 from .autopilot import ComputedForcePD, NonlinearCompensator, TandemWithIntegrator

@@ -53,8 +53,8 @@ import numpy as np
 from jaxtyping import Array
 
 from .._arrays import FloatScalar, dot as _dot, param as _param
-from .._jit import eager_jit
 from .._model import AbstractModel, SolverStructure
+from .._programs import eager_jit
 from .._validate import (
     check_int,
     check_nonnegative,
