@@ -781,7 +781,7 @@ def main(
     report_only=False,
 ):
     common.set_quick(quick)
-    js.enable_compilation_cache(warn=False)
+    js.enable_compilation_cache()
     path = common.results_dir() / f"{NAME}.csv"
     if not report_only:
         done = {_key(r) for r in read_rows(path)}
