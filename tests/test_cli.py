@@ -270,7 +270,7 @@ def test_a_saved_program_of_a_users_own_class_follows_its_source(tmp_path):
     # A model or effect of the user's own is keyed by the file that defines it: a
     # program saved before that file changed is not run after. A class without a
     # source file (a notebook's) is not saved at all.
-    import importlib
+    import importlib.util
     import sys
     import types
 
@@ -281,15 +281,17 @@ def test_a_saved_program_of_a_users_own_class_follows_its_source(tmp_path):
         "class Gain(eqx.Module):\n"
         "    k: float = eqx.field(static=True)\n"
     )
-    (tmp_path / "user_gain.py").write_text(source)
-    sys.path.insert(0, str(tmp_path))
+    path = tmp_path / "user_gain.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location("user_gain", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["user_gain"] = module
     try:
-        module = importlib.import_module("user_gain")
+        spec.loader.exec_module(module)
         before = _programs._full_key(_double, (module.Gain(2.0),), None, [])
-        (tmp_path / "user_gain.py").write_text(source + "# edited\n")
+        path.write_text(source + "# edited\n")
         after = _programs._full_key(_double, (module.Gain(2.0),), None, [])
     finally:
-        sys.path.remove(str(tmp_path))
         sys.modules.pop("user_gain", None)
     notebook = types.ModuleType("notebook_cell")
     exec(source, notebook.__dict__)
