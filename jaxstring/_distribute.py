@@ -266,13 +266,13 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
     parts = [
         tuple(v[i * chunk : (i + 1) * chunk] for v in padded) for i in range(n_chunks)
     ]
-    own = executor is None
-    # jaxstring's workers start (import JAX) while this process traces the program.
-    pool = process_pool(workers) if own else executor
     key, program, leaves, outputs = export_chunk(fn, (parts[0],) + tuple(args[1:]))
     shared = [np.asarray(x) for x in leaves[n_vals:]]
     chunks = [[np.asarray(v) for v in p] + shared for p in parts]
-    results = run_chunks(pool, key, program, chunks, own)
+    own = executor is None
+    results = run_chunks(
+        process_pool(workers) if own else executor, key, program, chunks, own
+    )
     failed = {}
     out = []
     for i, r in enumerate(results):

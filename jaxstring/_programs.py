@@ -229,9 +229,8 @@ def call(fn, *args):
         return None
     with compile_notice(fn.__name__.lstrip("_").removesuffix("_fields")):
         if key not in _LOADED:
-            exported = _load_or_export(fn, key, static, treedef, leaves)
+            exported = _exported(fn, key, static, treedef, leaves)
             if exported is None:
-                _REFUSED.add(key)
                 return None
             _LOADED[key] = jax.jit(
                 exported.call, compiler_options=cpu_compiler_options()
@@ -256,7 +255,12 @@ def saved_export(fn, static, treedef, leaves):
     ensure_compilation_cache()
     if program_folder() is None:
         return None
-    key = _key(fn, static, treedef, leaves)
+    return _exported(fn, _key(fn, static, treedef, leaves), static, treedef, leaves)
+
+
+def _exported(fn, key, static, treedef, leaves):
+    """The program of `key`, read or traced and saved (`_load_or_export`); None
+    where there is no key or it cannot be exported (then remembered)."""
     if key is None or key in _REFUSED:
         return None
     exported = _load_or_export(fn, key, static, treedef, leaves)
