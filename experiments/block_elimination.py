@@ -44,6 +44,7 @@ from jaxstring import _integrate, _linalg
 formulation, solver, k, max_block = sys.argv[1], sys.argv[2], int(sys.argv[3]), \\
     int(sys.argv[4])
 _linalg.banded.SEQUENTIAL_MAX_BLOCK = max_block
+_linalg.banded.SEQUENTIAL_DECLARED_MAX_BLOCK = max_block
 if formulation == "WD0050":
     scene = js.lines.read_moordyn(js.lines.case_path("WD0050_Chain.txt"),
         motion=js.lines.case_path("QuasiStatic/ZZP1_A1.txt"))

@@ -27,6 +27,7 @@ from .banded import (
     bordered_jacobian as bordered_jacobian,
     choose_structure as choose_structure,
     declared_second_order as declared_second_order,
+    declared_sequential as declared_sequential,
     declared_width as declared_width,
     detect_width as detect_width,
     factor as factor,

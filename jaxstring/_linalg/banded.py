@@ -275,6 +275,8 @@ class BlockTridiagonal(eqx.Module):
     # d > 0: node rows are (q, v), d components each, and the matrix is
     # a I + b J of a vector field with dq/dt = v (see `SecondOrderFactor`).
     second_order: int = eqx.field(static=True, default=0)
+    # The model prefers the sequential elimination (`block_factor`).
+    sequential: bool = eqx.field(static=True, default=False)
 
     def _pad(self, x):
         N, B = self.diag.shape[0], self.diag.shape[1]
@@ -310,6 +312,7 @@ class BlockTridiagonal(eqx.Module):
             self.b,
             self.width,
             self.second_order,
+            self.sequential,
         )
 
     def _pad_mask(self):
@@ -333,14 +336,16 @@ class BlockTridiagonal(eqx.Module):
 
 
 def block_tridiagonal_jacobian(
-    fn, y, width: int, linear_fn=None, second_order: int = 0
+    fn, y, width: int, linear_fn=None, second_order: int = 0, sequential=False
 ) -> BlockTridiagonal:
     """Jacobian of `fn` at `y` (node-major `(n, b)`) as a block-tridiagonal matrix of
     `width`-node super-blocks, from 3 B JVPs (B = width * b).
 
     `linear_fn`, if given, is the JVP `v -> J v` (e.g. from `jax.linearize`), so
     that a caller that already linearised does not do it again. `second_order`
-    (d > 0, with `width` 1 and b = 2 d) marks the (q, v) node layout for `factor`.
+    (d > 0, with `width` 1 and b = 2 d) marks the (q, v) node layout for `factor`;
+    `sequential` the model's preference for the sequential elimination
+    (`declared_sequential`).
     """
     n, b = y.shape
     B = width * b
@@ -378,7 +383,7 @@ def block_tridiagonal_jacobian(
         pad_eye = np.eye(B)[None] * (~real.reshape(N, B))[:, :, None]
         diag = diag + jnp.asarray(pad_eye, diag.dtype)
     d = second_order if (width == 1 and b == 2 * second_order) else 0
-    return BlockTridiagonal(lower, diag, upper, n, b, width, d)
+    return BlockTridiagonal(lower, diag, upper, n, b, width, d, bool(sequential))
 
 
 # ----------------------------------------------------------------------------
@@ -580,6 +585,10 @@ SEQUENTIAL_MAX_BLOCK = 2
 """`block_factor` eliminates block-tridiagonal matrices of blocks up to this size
 sequentially (`thomas_factor`), larger ones by block cyclic reduction."""
 
+SEQUENTIAL_DECLARED_MAX_BLOCK = 4
+"""... and blocks up to this size (closed-form inverses) of a model that declares
+`SolverStructure.sequential_elimination`."""
+
 
 def block_factor(mat: BlockTridiagonal):
     """The factorisation of a block-tridiagonal matrix for `block_solve`: the block
@@ -587,9 +596,14 @@ def block_factor(mat: BlockTridiagonal):
     (its closed-form 2 x 2 inverses make each sequential step a few fused
     operations: as fast to run as the reduction for the strings measured, and its
     program, one step in a loop, compiles several times faster than the reduction's
-    unrolled levels), block cyclic reduction otherwise (O(log N) depth, for larger
-    blocks and for accelerators)."""
-    if mat.diag.shape[-1] <= SEQUENTIAL_MAX_BLOCK and jax.default_backend() == "cpu":
+    unrolled levels), and for blocks up to 4 x 4 of a model that prefers it
+    (`SolverStructure.sequential_elimination`: mooring lines, whose whole solves
+    compile and run faster so); block cyclic reduction otherwise (O(log N) depth,
+    for larger blocks and for accelerators)."""
+    B = mat.diag.shape[-1]
+    small = B <= SEQUENTIAL_MAX_BLOCK
+    declared = mat.sequential and B <= SEQUENTIAL_DECLARED_MAX_BLOCK
+    if (small or declared) and jax.default_backend() == "cpu":
         return thomas_factor(mat)
     return bcr_factor(mat)
 
@@ -726,6 +740,7 @@ def second_order_factor(mat: BlockTridiagonal) -> SecondOrderFactor:
         n,
         d,
         1,
+        sequential=mat.sequential,
     )
     return SecondOrderFactor(
         block_factor(S), BlockTridiagonal(*P, n, d, 1), inv_alpha, ratio
@@ -798,6 +813,14 @@ def declared_second_order(fn, y, args=None) -> int:
     return 0 if scene is None else int(scene.structure.second_order)
 
 
+def declared_sequential(fn, y, args=None) -> bool:
+    """Whether the scene's model prefers the sequential elimination of its Newton
+    blocks (`SolverStructure.sequential_elimination`), where `y` has the scene's
+    state shape."""
+    scene = _declared_scene(fn, y, args)
+    return scene is not None and bool(scene.structure.sequential_elimination)
+
+
 def model_jacobian(terms, t, y, args):
     """The model's own Jacobian (`AbstractModel.vf_jacobian`, where its
     `SolverStructure.jacobian` says it has one) when the ODE is a scene's vector
@@ -816,17 +839,18 @@ def model_jacobian(terms, t, y, args):
     return args.model.vf_jacobian(t, y, args.effects, args.env)
 
 
-def jacobian(fn, y, width, linear_fn=None, second_order=0):
+def jacobian(fn, y, width, linear_fn=None, second_order=0, sequential=False):
     """Jacobian of `fn` at `y`: `BlockTridiagonal` if `width` is an int, else dense.
     `second_order` > 0 (from `declared_second_order`) selects the reduced
-    factorisation of `SecondOrderFactor` for the matrices built from it."""
+    factorisation of `SecondOrderFactor` for the matrices built from it;
+    `sequential` (from `declared_sequential`) the sequential elimination."""
     if width is None:
         flat, unravel = jfu.ravel_pytree(y)
         f_flat = lambda v: jfu.ravel_pytree(fn(unravel(v)))[0]
         return DenseJacobian(jax.jacfwd(f_flat)(flat))
     if isinstance(width, BorderedWidth):
-        return bordered_jacobian(fn, y, width, linear_fn, second_order)
-    return block_tridiagonal_jacobian(fn, y, width, linear_fn, second_order)
+        return bordered_jacobian(fn, y, width, linear_fn, second_order, sequential)
+    return block_tridiagonal_jacobian(fn, y, width, linear_fn, second_order, sequential)
 
 
 @jax.jit
@@ -882,7 +906,9 @@ class BorderedJacobian(eqx.Module):
         return jnp.block([[self.A, self.R], [self.C, self.band.to_dense()]])
 
 
-def bordered_jacobian(fn, y, spec: BorderedWidth, linear_fn=None, second_order=0):
+def bordered_jacobian(
+    fn, y, spec: BorderedWidth, linear_fn=None, second_order=0, sequential=False
+):
     """The Jacobian of `fn` at `y` (node-major `(n, b)`) as a `BorderedJacobian`:
     the band of the rows after the border from 3 B JVPs (`block_tridiagonal_jacobian`
     with the border held), the border's columns from `k b` JVPs and its rows from
@@ -893,7 +919,9 @@ def bordered_jacobian(fn, y, spec: BorderedWidth, linear_fn=None, second_order=0
         _, linear_fn = jax.linearize(fn, y)
     zb = jnp.zeros((k, b), y.dtype)
     lin_band = lambda v: linear_fn(jnp.concatenate([zb, v]))[k:]
-    band = block_tridiagonal_jacobian(None, y[k:], spec.width, lin_band, second_order)
+    band = block_tridiagonal_jacobian(
+        None, y[k:], spec.width, lin_band, second_order, sequential
+    )
     kb = k * b
     seeds = (
         jnp.zeros((kb, n, b), y.dtype)

@@ -303,7 +303,8 @@ class BDF(dfx.AbstractAdaptiveSolver):
         fn = (lambda u: u) if shape_only else (lambda u: terms.vf(t, u, args))
         _, lin = jax.linearize(fn, y)
         so = _linalg.declared_second_order(_VF(), y, (t, terms, args))
-        return lax.stop_gradient(_linalg.jacobian(fn, y, width, lin, so))
+        seq = _linalg.declared_sequential(_VF(), y, (t, terms, args))
+        return lax.stop_gradient(_linalg.jacobian(fn, y, width, lin, so, seq))
 
     def _start(self, terms, t0, h, y0, args):
         f0 = terms.vf(t0, y0, args)

@@ -120,14 +120,16 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         # f at the step's start: the last stage of the step before (FSAL)
         return terms.vf(t0, y0, args)
 
-    def _factor(self, terms, t, y, args, hg, width, second_order, shape_only=False):
+    def _factor(
+        self, terms, t, y, args, hg, width, second_order, sequential, shape_only=False
+    ):
         """The factorisation of I - h gamma J(t, y) (no gradient). `shape_only`:
         for its structure only (`jax.eval_shape`), from the identity's Jacobian,
         which has the same structure, without tracing the vector field's JVPs."""
         jac = _linalg.model_jacobian(terms, t, y, args) if width == 1 else None
         if jac is None:
             fn = (lambda u: u) if shape_only else (lambda u: terms.vf(t, u, args))
-            jac = _linalg.jacobian(fn, y, width, second_order=second_order)
+            jac = _linalg.jacobian(fn, y, width, None, second_order, sequential)
         return lax.stop_gradient(_linalg.factor(jac.scale_shift(1.0, -hg)))
 
     @traced_once
@@ -139,7 +141,10 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         vf = _VF()
         width = _linalg.choose_structure(vf, y0, (t0, terms, args), self.linear_solver)
         second_order = _linalg.declared_second_order(vf, y0, (t0, terms, args))
-        factor = lambda t, y: self._factor(terms, t, y, args, hg, width, second_order)
+        seq = _linalg.declared_sequential(vf, y0, (t0, terms, args))
+        factor = lambda t, y: self._factor(
+            terms, t, y, args, hg, width, second_order, seq
+        )
 
         f0 = solver_state
         if made_jump is not False:
@@ -158,7 +163,9 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         A, P, C = (jnp.asarray(x, dtype) for x in (A, P, np.asarray(tab.c)))
         combine = lambda row, fs: jnp.tensordot(row, fs, axes=1)
         shapes = jax.eval_shape(
-            lambda: self._factor(terms, t0, y0, args, hg, width, second_order, True)
+            lambda: self._factor(
+                terms, t0, y0, args, hg, width, second_order, seq, shape_only=True
+            )
         )
         placeholder = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
 

@@ -214,7 +214,9 @@ class Rodas5P(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         if jac is None:
             f0, lin = jax.linearize(lambda y: terms.vf(t0, y, args), y0)
             so = _linalg.declared_second_order(vf, y0, (t0, terms, args))
-            jac = _linalg.jacobian(lambda y: terms.vf(t0, y, args), y0, width, lin, so)
+            seq = _linalg.declared_sequential(vf, y0, (t0, terms, args))
+            fn = lambda y: terms.vf(t0, y, args)
+            jac = _linalg.jacobian(fn, y0, width, lin, so, seq)
         else:
             f0 = terms.vf(t0, y0, args)
         # df/dt by one JVP in t (zero for autonomous scenes, and cheap).

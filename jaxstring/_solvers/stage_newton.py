@@ -241,8 +241,9 @@ class StageNewton(optx.AbstractRootFinder):
         jac = _stage_model_jacobian(y, args) if width == 1 else None
         if jac is None:
             so = _linalg.declared_second_order(noaux, y, args)
+            seq = _linalg.declared_sequential(noaux, y, args)
             relation = (lambda u: u) if shape_only else (lambda u: noaux(u, args))
-            jac = _linalg.jacobian(relation, y, width, second_order=so)
+            jac = _linalg.jacobian(relation, y, width, second_order=so, sequential=seq)
         fac = _linalg.factor(jac)
         return lax.stop_gradient(fac)
 

@@ -718,7 +718,9 @@ class LineNetwork(AbstractModel):
         axial forces turn with the lines); BDF keeps its Jacobian across steps
         (mooring chains move slowly). Bending couples each node to the nodes two
         away along its line; a rigid object's rows couple to one another and to
-        the nodes next to the line ends on it."""
+        the nodes next to the line ends on it. The Newton blocks are eliminated
+        sequentially (faster to compile and as fast to run for the chains
+        measured)."""
         del effects
         top = self.topology
         n_tri, start = top.n_tri, top.rigid_start
@@ -749,7 +751,10 @@ class LineNetwork(AbstractModel):
                 width = max(width, max(rr) - min(rr))
         second_order = 0 if frames.groups else 3
         return SolverStructure(
-            bandwidth=width, second_order=second_order, stage_jacobians=True
+            bandwidth=width,
+            second_order=second_order,
+            stage_jacobians=True,
+            sequential_elimination=True,
         )
 
     def damping_BA(self):

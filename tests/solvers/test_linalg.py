@@ -128,6 +128,15 @@ def test_block_thomas_and_cyclic_reduction_equal_the_dense_solve(B):
         assert np.max(np.abs(x - x_ref)) < 1e-13 * np.max(np.abs(x_ref))
     x = np.asarray(_linalg.bcr_solve(jax.jit(_linalg.bcr_factor)(mat), jnp.asarray(f)))
     assert np.max(np.abs(x - x_ref)) < 1e-13 * np.max(np.abs(x_ref))
+    # A model that declares the sequential elimination (mooring lines) gets it for
+    # blocks up to 4 x 4, through a Newton matrix's shift and scale too.
+    declared = _linalg.BlockTridiagonal(
+        *map(jnp.asarray, (L, D, U)), N, B, 1, sequential=True
+    ).scale_shift(0.0, 1.0)
+    fac = jax.jit(_linalg.block_factor)(declared)
+    assert isinstance(fac, _linalg.ThomasFactor)
+    x = np.asarray(_linalg.block_solve(fac, jnp.asarray(f)))
+    assert np.max(np.abs(x - x_ref)) < 1e-13 * np.max(np.abs(x_ref))
 
 
 # ---------------------------------------------------------------------------
@@ -179,6 +188,28 @@ def test_second_order_factor_equals_dense_solve(dim, a, b):
     )
     assert backward < 1e-15, backward
     assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-9
+
+
+def test_declared_sequential_elimination_reaches_the_reduced_blocks():
+    # A mooring line declares the sequential elimination: its velocity-reduced 3 x 3
+    # blocks are eliminated by block Thomas; a 3D string's by cyclic reduction.
+    deck = js.lines.read_moordyn(js.lines.case_path("WD0050_Chain.txt"))
+    string = js.string_pendulum(k=6, dim=3)
+    kinds = []
+    for scene in (deck, string):
+        fn = lambda u, scene=scene: scene.vector_field(0.0, u)
+        args = (0.0, None, scene)
+        so = _linalg.declared_second_order(fn, scene.y0, args)
+        seq = _linalg.declared_sequential(fn, scene.y0, args)
+        fac = jax.eval_shape(
+            lambda u: _linalg.factor(
+                _linalg.jacobian(fn, u, 1, None, so, seq).scale_shift(1.0, -0.01)
+            ),
+            scene.y0,
+        )
+        assert so == 3
+        kinds.append((seq, type(fac.sfac).__name__))
+    assert kinds == [(True, "ThomasFactor"), (False, "BCRFactor")]
 
 
 def test_declared_second_order_matches_the_jacobian():
