@@ -11,6 +11,7 @@ import sys
 import textwrap
 import time
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -147,6 +148,7 @@ def test_two_distributed_processes_give_the_one_process_results(tmp_path, one_pr
 # main guard.
 _UNGUARDED = f"""
 import sys
+import jax.numpy as jnp
 import numpy as np
 import jaxstring as js
 alphas = np.linspace(0.005, 0.05, 8)
@@ -212,6 +214,7 @@ def test_a_sweep_program_is_saved_and_a_later_process_reads_it(tmp_path, monkeyp
     args = ((ALPHAS[:2],), scene, getters, _default_fn, config, ts, 2)
     custom = args[:3] + (lambda traj, s: traj.end_mass,) + args[4:]
     _programs.set_program_folder(str(tmp_path))
+    _distribute._EXPORTED.clear()  # exported by an earlier test of this process
     try:
         key, program, leaves, _ = _distribute.export_chunk(_sweep_local, args)
         _distribute.export_chunk(_sweep_local, custom)  # a lambda: not saved
@@ -341,7 +344,58 @@ def test_a_pool_with_a_worker_per_core_binds_each_to_a_core_of_its_own():
         bound = [sorted(os.sched_getaffinity(p.pid)) for p in workers]
         assert all(len(b) == 1 for b in bound)
         assert sorted(b[0] for b in bound) == _distribute.pinned_cores(cores)
+        # Every thread of a worker (XLA's too) is on the worker's core.
+        for p, b in zip(workers, bound):
+            tids = [int(t) for t in os.listdir(f"/proc/{p.pid}/task")]
+            assert len(tids) > 1
+            assert all(sorted(os.sched_getaffinity(t)) == b for t in tids)
         # Fewer workers than cores: the system places them.
         assert _distribute.pinned_cores(cores - 1) is None
     finally:
         _distribute.shutdown_pool()
+
+
+def test_workers_compile_a_program_once_and_read_it_from_the_cache(tmp_path):
+    # The first worker to take a program compiles it under a file lock; another
+    # waits for the lock and then reads the compilation from the cache, and once
+    # the program is marked compiled nobody waits.
+    import fcntl
+    import threading
+
+    import jax
+
+    from jaxstring import _worker
+
+    cpu = jax.local_devices(backend="cpu")[0]
+    x = jax.device_put(np.linspace(0.0, 1.0, 5), cpu)
+    lowered = jax.jit(lambda x: jnp.cumsum(jnp.sin(x) ** 2)).lower(x)
+    cache, key = str(tmp_path), "k" * 32
+    folder = tmp_path / "jaxstring-compiling"
+    folder.mkdir()
+    finished = []
+    with open(folder / f"{key}.lock", "a") as held:  # a worker compiling it
+        fcntl.flock(held, fcntl.LOCK_EX)
+        waiter = threading.Thread(
+            target=lambda: finished.append(_worker._compile(lowered, key, cache))
+        )
+        waiter.start()
+        waiter.join(timeout=1.0)
+        assert waiter.is_alive() and not finished  # waits for the lock
+        (folder / f"{key}.done").touch()  # compiled, then released
+        fcntl.flock(held, fcntl.LOCK_UN)
+    waiter.join(timeout=60)
+    assert len(finished) == 1
+    expected = np.cumsum(np.sin(np.linspace(0.0, 1.0, 5)) ** 2)
+    np.testing.assert_allclose(np.asarray(finished[0](x)), expected, rtol=1e-15)
+    # Marked compiled: a held lock does not stop another worker.
+    with open(folder / f"{key}.lock", "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        np.testing.assert_allclose(
+            np.asarray(_worker._compile(lowered, key, cache)(x)), expected, rtol=1e-15
+        )
+    # A new program: the first worker compiles it and marks it compiled.
+    other = "m" * 32
+    np.testing.assert_allclose(
+        np.asarray(_worker._compile(lowered, other, cache)(x)), expected, rtol=1e-15
+    )
+    assert (folder / f"{other}.done").exists()
