@@ -266,6 +266,8 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
     parts = [
         tuple(v[i * chunk : (i + 1) * chunk] for v in padded) for i in range(n_chunks)
     ]
+    if executor is None:  # its workers start while this process traces
+        process_pool(workers)
     key, program, leaves, outputs = export_chunk(fn, (parts[0],) + tuple(args[1:]))
     shared = [np.asarray(x) for x in leaves[n_vals:]]
     chunks = [[np.asarray(v) for v in p] + shared for p in parts]
