@@ -374,6 +374,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
         scale = atol + rtol * jnp.abs(y_pred)
         width = self._width(terms, t1, y_pred, args)
         second_order = _linalg.declared_second_order(_VF(), y0, (t1, terms, args))
+        sequential = _linalg.declared_sequential(_VF(), y0, (t1, terms, args))
 
         def residual(d):
             return c * terms.vf(t1, y_pred + d, args) - psi - d
@@ -444,7 +445,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             # custom_root traces this with every step, gradient or not: the reduced
             # second-order factorisation (2 x 2 closed-form blocks for a string)
             # also keeps that tracing cheap.
-            mat = _linalg.jacobian(g, b, width, g, second_order)
+            mat = _linalg.jacobian(g, b, width, g, second_order, sequential)
             return _linalg.factor(mat).solve(b)
 
         aux_types = []

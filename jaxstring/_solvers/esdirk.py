@@ -184,7 +184,7 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             f_i, conv = lax.cond(
                 active,
                 lambda: self._stage(
-                    terms, args, ti, z, hg, f_init, fac, width, second_order
+                    terms, args, ti, z, hg, f_init, fac, width, second_order, seq
                 ),
                 lambda: (f_init, jnp.array(True)),
             )
@@ -234,7 +234,9 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         )
         return f, conv
 
-    def _stage(self, terms, args, ti, z, hg, f_init, fac, width, second_order):
+    def _stage(
+        self, terms, args, ti, z, hg, f_init, fac, width, second_order, sequential
+    ):
         """One attempt at an implicit stage: the simplified Newton iteration from
         `f_init` with the factorisation `fac`. Returns (f_i, converged)."""
 
@@ -248,7 +250,7 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             return f, conv.astype(f.dtype)
 
         def tangent_solve(g, b):
-            mat = _linalg.jacobian(g, b, width, g, second_order)
+            mat = _linalg.jacobian(g, b, width, g, second_order, sequential)
             return _linalg.factor(mat).solve(b)
 
         f, conv = lax.custom_root(residual, f_init, solve, tangent_solve, has_aux=True)
