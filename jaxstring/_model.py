@@ -36,7 +36,7 @@ class SolverStructure:
     - `dense`: the Jacobian has no narrow band (every node couples to every other,
       e.g. through tensions solved over the whole chain): the solvers take the
       dense path without probing.
-    - `sequential_elimination`: the band's blocks (up to 4 x 4) are eliminated
+    - `sequential_elimination`: the band's blocks are eliminated
       from the first to the last (block Thomas, one step in a loop) instead of by
       cyclic reduction (log2 N unrolled levels): a smaller program, for models
       whose factorisations are a small share of a step (measured for mooring

@@ -585,10 +585,6 @@ SEQUENTIAL_MAX_BLOCK = 2
 """`block_factor` eliminates block-tridiagonal matrices of blocks up to this size
 sequentially (`thomas_factor`), larger ones by block cyclic reduction."""
 
-SEQUENTIAL_DECLARED_MAX_BLOCK = 4
-"""... and blocks up to this size (closed-form inverses) of a model that declares
-`SolverStructure.sequential_elimination`."""
-
 
 def block_factor(mat: BlockTridiagonal):
     """The factorisation of a block-tridiagonal matrix for `block_solve`: the block
@@ -596,14 +592,13 @@ def block_factor(mat: BlockTridiagonal):
     (its closed-form 2 x 2 inverses make each sequential step a few fused
     operations: as fast to run as the reduction for the strings measured, and its
     program, one step in a loop, compiles several times faster than the reduction's
-    unrolled levels), and for blocks up to 4 x 4 of a model that prefers it
-    (`SolverStructure.sequential_elimination`: mooring lines, whose whole solves
-    compile and run faster so); block cyclic reduction otherwise (O(log N) depth,
-    for larger blocks and for accelerators)."""
-    B = mat.diag.shape[-1]
-    small = B <= SEQUENTIAL_MAX_BLOCK
-    declared = mat.sequential and B <= SEQUENTIAL_DECLARED_MAX_BLOCK
-    if (small or declared) and jax.default_backend() == "cpu":
+    unrolled levels), and for blocks of any size of a model that prefers it
+    (`SolverStructure.sequential_elimination`: mooring lines, with or without
+    bodies and rods, whose whole solves compile and run faster so); block cyclic
+    reduction otherwise (O(log N) depth, for larger blocks and for
+    accelerators)."""
+    small = mat.diag.shape[-1] <= SEQUENTIAL_MAX_BLOCK
+    if (small or mat.sequential) and jax.default_backend() == "cpu":
         return thomas_factor(mat)
     return bcr_factor(mat)
 
