@@ -76,3 +76,80 @@ def host_map(op, tree):
     return jax.tree_util.tree_unflatten(
         treedef, jax.device_put(out, _first_device(leaves))
     )
+
+
+# Static index arrays (a network's topology) as slices. XLA keeps a gather or a
+# scatter with constant indices as it is: each one ends a fusion (a kernel of its
+# own to compile and to launch), while an index array made of arithmetic runs
+# (the nodes of a line, in a state ordered for a narrow band: consecutive or
+# strided rows; a line's parameter repeated over its segments) reads and writes
+# the same rows as strided slices, (interior) pads and concatenations, which fuse.
+MAX_RUNS = 4
+"""Index arrays of more runs than this stay a gather (a scatter). Every fusion
+that reads a concatenation of K runs holds the K-way choice: measured on MoorDyn's
+decks (docs/lines.md, "Index arrays as slices"), up to 4 runs (a line's nodes
+between its end points, a few lines) compiled and ran faster than the gathers,
+16 runs (the 11 lines of the tripod deck) compiled three times slower."""
+
+
+def _runs(idx):
+    """`idx` (1-D, static) as arithmetic runs `(position, length, first value,
+    step)`, greedily from the left (a run of one has step 1)."""
+    runs, p, n = [], 0, idx.shape[0]
+    while p < n:
+        step = int(idx[p + 1] - idx[p]) if p + 1 < n else 1
+        q = p + 2 if p + 1 < n else p + 1
+        while q < n and idx[q] - idx[q - 1] == step:
+            q += 1
+        runs.append((p, q - p, int(idx[p]), step))
+        p = q
+    return runs
+
+
+def _run_rows(x, n, first, step):
+    """`x[first + step * arange(n)]` as a slice (reversed for a negative step) or
+    one row broadcast (step 0)."""
+    if step == 0:
+        return jnp.broadcast_to(x[first], (n,) + x.shape[1:])
+    last = first + step * (n - 1)
+    lo, hi = min(first, last), max(first, last)
+    rows = x[lo : hi + 1 : abs(step)]
+    return rows if step > 0 else rows[::-1]
+
+
+def take_rows(x, idx):
+    """`x[idx]` for a static integer array `idx` (NumPy, non-negative): strided
+    slices and broadcast rows where `idx` is a few arithmetic runs (`MAX_RUNS`),
+    a gather otherwise."""
+    idx = np.asarray(idx)
+    runs = _runs(idx)
+    if not runs or len(runs) > MAX_RUNS:
+        return x[idx]
+    parts = [_run_rows(x, n, first, step) for _, n, first, step in runs]
+    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
+
+
+def add_rows(size, idx, v):
+    """`zeros((size,) + v.shape[1:]).at[idx].add(v)` for a static integer array
+    `idx` (NumPy, non-negative, below `size`). Where `idx` has no repeated value
+    the result is `v` with a zero row appended, read at the inverse index (row
+    j of the result from the `v` row sent there, else the zero row): slices
+    where that inverse index is a few runs (`take_rows`). Repeated values: the
+    first occurrences so, plus the rest (fewer) likewise. A scatter where an
+    inverse index has more runs than `MAX_RUNS`."""
+    idx = np.asarray(idx, dtype=np.int64)
+    n = idx.shape[0]
+    if n == 0:
+        return jnp.zeros((size,) + v.shape[1:], v.dtype)
+    first = np.sort(np.unique(idx, return_index=True)[1])
+    if first.shape[0] < n:
+        rest = np.setdiff1d(np.arange(n), first)
+        return add_rows(size, idx[first], take_rows(v, first)) + add_rows(
+            size, idx[rest], take_rows(v, rest)
+        )
+    inv = np.full(size, n)
+    inv[idx] = np.arange(n)
+    if len(_runs(inv)) > MAX_RUNS:
+        return jnp.zeros((size,) + v.shape[1:], v.dtype).at[idx].add(v)
+    zero = jnp.zeros((1,) + v.shape[1:], v.dtype)
+    return take_rows(jnp.concatenate([v, zero], axis=0), inv)

@@ -30,6 +30,8 @@ line gets exactly zero force and finite derivatives), where MoorDyn's
 
 import jax.numpy as jnp
 
+from .._arrays import add_rows, take_rows
+
 
 def curvature_vectors(q1, q2, l_sum):
     """K p for joints between unit directions `q1`, `q2` `(J, 3)` over the length
@@ -49,31 +51,38 @@ def bending_forces(qs, lstr, EI_seg, bend, t_a, t_b, n_nodes):
     `bend` the network's static bending index arrays (`_Bending`); `t_a`, `t_b`
     the clamped ends' tangents `(Ca, 3)` and `(Cb, 3)` (see the module docstring).
     """
+    # static index arrays as slices where they are runs (`take_rows`, `add_rows`);
+    # the nodes of the three groups are distinct, so the curvatures add up
+    take = take_rows
     f = jnp.zeros((n_nodes, 3))
     K = jnp.zeros(n_nodes)
     if len(bend.inner_node):
         sp, sn = bend.inner_prev, bend.inner_next
-        Kp = curvature_vectors(qs[sp], qs[sn], lstr[sp] + lstr[sn])
-        EI = EI_seg[sp]
-        fm = (EI / lstr[sp])[:, None] * jnp.cross(qs[sp], Kp)
-        fp = (EI / lstr[sn])[:, None] * jnp.cross(qs[sn], Kp)
+        q_p, q_n, l_p, l_n = take(qs, sp), take(qs, sn), take(lstr, sp), take(lstr, sn)
+        Kp = curvature_vectors(q_p, q_n, l_p + l_n)
+        EI = take(EI_seg, sp)
+        fm = (EI / l_p)[:, None] * jnp.cross(q_p, Kp)
+        fp = (EI / l_n)[:, None] * jnp.cross(q_n, Kp)
         m = bend.inner_node
-        f = f.at[m - 1].add(fm).at[m + 1].add(fp).at[m].add(-(fm + fp))
-        K = K.at[m].set(_norm(Kp))
+        f = f + add_rows(n_nodes, m - 1, fm) + add_rows(n_nodes, m + 1, fp)
+        f = f - add_rows(n_nodes, m, fm + fp)
+        K = K + add_rows(n_nodes, m, _norm(Kp))
     if len(bend.clamp_a_node):
         s = bend.clamp_a_seg
-        Kp = curvature_vectors(t_a, qs[s], lstr[s])
-        fp = (EI_seg[s] / lstr[s])[:, None] * jnp.cross(qs[s], Kp)
+        q_s, l_s = take(qs, s), take(lstr, s)
+        Kp = curvature_vectors(t_a, q_s, l_s)
+        fp = (take(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
         m = bend.clamp_a_node
-        f = f.at[m + 1].add(fp).at[m].add(-fp)
-        K = K.at[m].set(_norm(Kp))
+        f = f + add_rows(n_nodes, m + 1, fp) - add_rows(n_nodes, m, fp)
+        K = K + add_rows(n_nodes, m, _norm(Kp))
     if len(bend.clamp_b_node):
         s = bend.clamp_b_seg
-        Kp = curvature_vectors(qs[s], t_b, lstr[s])
-        fm = (EI_seg[s] / lstr[s])[:, None] * jnp.cross(qs[s], Kp)
+        q_s, l_s = take(qs, s), take(lstr, s)
+        Kp = curvature_vectors(q_s, t_b, l_s)
+        fm = (take(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
         m = bend.clamp_b_node
-        f = f.at[m - 1].add(fm).at[m].add(-fm)
-        K = K.at[m].set(_norm(Kp))
+        f = f + add_rows(n_nodes, m - 1, fm) - add_rows(n_nodes, m, fm)
+        K = K + add_rows(n_nodes, m, _norm(Kp))
     return f, K
 
 

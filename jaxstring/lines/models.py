@@ -38,7 +38,14 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .. import _programs
-from .._arrays import FloatScalar, dot as _dot, host_op, param as _param
+from .._arrays import (
+    FloatScalar,
+    add_rows,
+    dot as _dot,
+    host_op,
+    param as _param,
+    take_rows,
+)
 from .._blas import single_blas_thread
 from .._environment import Environment
 from .._geometry import safe_norm
@@ -930,32 +937,36 @@ class LineNetwork(AbstractModel):
         frames = self.frames(t, y) if (self.rods or self.bodies) else []
         rods = self._rod_geometry(frames)
         sp, sv = self._rigid_slots(frames, rods)
-        tri = y[top.tri_rows]
+        tri = take_rows(y, top.tri_rows)
         Bp = jnp.concatenate([tri[:, :3], hp, sp], axis=0)
         Bv = jnp.concatenate([tri[:, 3:], hv, sv], axis=0)
-        R, V = Bp[top.body], Bv[top.body]
+        R, V = take_rows(Bp, top.body), take_rows(Bv, top.body)
         lo, hi = top.seg_lo, top.seg_lo + 1
         sl = top.seg_line
-        qs, lstr, ldstr, _ = links(R[lo], R[hi], V[lo], V[hi])
+        R_lo, R_hi = take_rows(R, lo), take_rows(R, hi)
+        qs, lstr, ldstr, _ = links(R_lo, R_hi, take_rows(V, lo), take_rows(V, hi))
         Lt, Ldot = self.unstretched_lengths(t)
         Nl = jnp.asarray(self.segments, jnp.float64)
-        l = (Lt / Nl)[sl]
-        ldot = (Ldot / Nl)[sl]
+        l = take_rows(Lt / Nl, sl)
+        ldot = take_rows(Ldot / Nl, sl)
         strain = (lstr - l) / l
         rate = (ldstr - lstr * ldot / l) / l
-        T = self.EA[sl] * jnp.maximum(strain, 0.0) + self.damping_BA()[sl] * rate
+        T = (
+            take_rows(self.EA, sl) * jnp.maximum(strain, 0.0)
+            + take_rows(self.damping_BA(), sl) * rate
+        )
         M = top.body.shape[0]
         seg_f = T[:, None] * qs
-        node_f = jnp.zeros((M, 3)).at[lo].add(seg_f).at[hi].add(-seg_f)
-        F = submerged_fraction(R[lo, 2], R[hi, 2], qs, 0.5 * self.d[sl])
+        node_f = add_rows(M, lo, seg_f) - add_rows(M, hi, seg_f)
+        F = submerged_fraction(R_lo[:, 2], R_hi[:, 2], qs, 0.5 * take_rows(self.d, sl))
         half = 0.5 * l
-        length = jnp.zeros(M).at[lo].add(half).at[hi].add(half)
-        sub = jnp.zeros(M).at[lo].add(half * F).at[hi].add(half * F)
+        length = add_rows(M, lo, half) + add_rows(M, hi, half)
+        sub = add_rows(M, lo, half * F) + add_rows(M, hi, half * F)
         nl = top.node_line
         area = 0.25 * jnp.pi * self.d**2
-        mass = self.w[nl] * length
-        volume = area[nl] * sub
-        q = unit(R[top.next] - R[top.prev])
+        mass = take_rows(self.w, nl) * length
+        volume = take_rows(area, nl) * sub
+        q = unit(take_rows(R, top.next) - take_rows(R, top.prev))
         curvature = None
         if self.EI is not None:
             bend = top.bending
@@ -967,14 +978,16 @@ class LineNetwork(AbstractModel):
                 q = q.at[bend.clamp_a_node].set(t_a).at[bend.clamp_b_node].set(t_b)
             else:
                 t_a = t_b = jnp.zeros((0, 3))
-            f_bend, curvature = bending_forces(qs, lstr, self.EI[sl], bend, t_a, t_b, M)
+            f_bend, curvature = bending_forces(
+                qs, lstr, take_rows(self.EI, sl), bend, t_a, t_b, M
+            )
             node_f = node_f + f_bend
         # the points with loads of their own: free points and points on bodies
         loaded = top.free + top.on_body
         fm, fv, fcda, fca = self._point_params(loaded)
         slots = top.point_body[np.asarray(loaded, np.int32)]
-        fp = Bp[slots] if loaded else jnp.zeros((0, 3))
-        fvel = Bv[slots] if loaded else jnp.zeros((0, 3))
+        fp = take_rows(Bp, slots) if loaded else jnp.zeros((0, 3))
+        fvel = take_rows(Bv, slots) if loaded else jnp.zeros((0, 3))
         kin = ChainKinematics(
             positions=R,
             velocities=V,
@@ -983,9 +996,9 @@ class LineNetwork(AbstractModel):
             volume=volume,
             length=length,
             wetted_length=sub,
-            diameter=self.d[nl],
-            Cd=self.Cd[nl],
-            CdAx=self.CdAx[nl],
+            diameter=take_rows(self.d, nl),
+            Cd=take_rows(self.Cd, nl),
+            CdAx=take_rows(self.CdAx, nl),
             point_positions=fp,
             point_velocities=fvel,
             point_mass=fm,
@@ -1000,16 +1013,17 @@ class LineNetwork(AbstractModel):
         eye = jnp.eye(3)
         Q = q[:, :, None] * q[:, None, :]
         added = (env.rho_water * volume)[:, None, None] * (
-            self.Ca[nl][:, None, None] * (eye - Q) + self.CaAx[nl][:, None, None] * Q
+            take_rows(self.Ca, nl)[:, None, None] * (eye - Q)
+            + take_rows(self.CaAx, nl)[:, None, None] * Q
         )
         node_m = mass[:, None, None] * eye + added
         nB = top.n_bodies
-        body_f = jnp.zeros((nB, 3)).at[top.body].add(node_f)
-        body_m = jnp.zeros((nB, 3, 3)).at[top.body].add(node_m)
+        body_f = add_rows(nB, top.body, node_f)
+        body_m = add_rows(nB, top.body, node_m)
         if loaded:
-            body_f = body_f.at[slots].add(point_f)
+            body_f = body_f + add_rows(nB, slots, point_f)
             pm = fm + env.rho_water * fv * fca
-            body_m = body_m.at[slots].add(pm[:, None, None] * eye)
+            body_m = body_m + add_rows(nB, slots, pm[:, None, None] * eye)
         return _State(
             kin=kin,
             seg_tension=T,
@@ -1052,12 +1066,9 @@ class LineNetwork(AbstractModel):
         top = self.topology
         n_tri, start = top.n_tri, top.rigid_start
         acc = _solve3(st.body_mass[:n_tri], st.body_force[:n_tri])
-        tri = y[top.tri_rows]
-        dy = (
-            jnp.zeros_like(y)
-            .at[top.tri_rows]
-            .set(jnp.concatenate([tri[:, 3:], acc], axis=1))
-        )
+        tri = take_rows(y, top.tri_rows)
+        # the rows are distinct: added to zeros, set
+        dy = add_rows(y.shape[0], top.tri_rows, jnp.concatenate([tri[:, 3:], acc], 1))
         if not (self.rods or self.bodies):
             return dy, jnp.concatenate([acc, st.held_acc], axis=0), [], []
         fr = top.frames
@@ -1093,7 +1104,10 @@ class LineNetwork(AbstractModel):
                 if len(on) and fr.has_dof(f):
                     k = start + on
                     pset = PointSet(
-                        local[f], st.rigid_pos[on], st.body_mass[k], st.body_force[k]
+                        local[f],
+                        take_rows(st.rigid_pos, on),
+                        take_rows(st.body_mass, k),
+                        take_rows(st.body_force, k),
                     )
                     sets.append(pset)
             _, acc_g, alp_g = group_accelerations(
@@ -1102,15 +1116,18 @@ class LineNetwork(AbstractModel):
             for f, k in local.items():
                 acc_f[f], alp_f[f] = acc_g[k], alp_g[k]
                 F = frames[f]
+                # a frame's rows of dy are zero so far: set by adding
+                n = dy.shape[0]
                 if fr.trans[f] == "state":
-                    dy = dy.at[fr.trans_row[f]].set(
-                        jnp.concatenate([F.velocity, acc_g[k]])
-                    )
+                    row = jnp.concatenate([F.velocity, acc_g[k]])
+                    dy = dy + add_rows(n, [fr.trans_row[f]], row[None])
                 if fr.rot[f] == "state":
                     r1, r2 = fr.rot_rows[f]
                     qd = quat_rate(jnp.concatenate([y[r2, :1], y[r1, :3]]), F.omega)
-                    dy = dy.at[r1].set(jnp.concatenate([qd[1:], alp_g[k]]))
-                    dy = dy.at[r2, 0].set(qd[0])
+                    row1 = jnp.concatenate([qd[1:], alp_g[k]])
+                    row2 = jnp.concatenate([qd[:1], jnp.zeros(5)])
+                    rows = jnp.stack([row1, row2])
+                    dy = dy + add_rows(n, [r1, r2], rows)
         # accelerations of the rigid slots
         pos = st.rigid_pos
         slot_acc = [jnp.zeros((0, 3))]
@@ -1143,9 +1160,9 @@ class LineNetwork(AbstractModel):
         moment = jnp.zeros(3)
         for e in effects:
             if isinstance(e, Gravity):
-                f_cg = f_cg.at[2].add(-body.mass * g)
+                f_cg = f_cg - body.mass * g * eye[2]
             elif isinstance(e, Buoyancy):
-                f_cg = f_cg.at[2].add(rho * body.volume * g)
+                f_cg = f_cg + rho * body.volume * g * eye[2]
             elif isinstance(e, Drag):
                 u = -F.velocity
                 if env.current is not None:
@@ -1173,9 +1190,9 @@ class LineNetwork(AbstractModel):
         top = self.topology
 
         def at(nodes):
-            a = body_acc[top.body[nodes]]
-            inertia = jnp.einsum("nij,nj->ni", st.node_mass[nodes], a)
-            return st.node_force[nodes] - inertia
+            a = take_rows(body_acc, top.body[nodes])
+            inertia = jnp.einsum("nij,nj->ni", take_rows(st.node_mass, nodes), a)
+            return take_rows(st.node_force, nodes) - inertia
 
         return at(top.end_a), at(top.end_b)
 
@@ -1216,12 +1233,12 @@ class LineNetwork(AbstractModel):
             at_rod = [k for k, e in enumerate(ends) if isinstance(e, RodEnd)]
             if at_point:
                 idx = np.asarray([ends[k] for k in at_point])
-                pf = pf.at[idx].add(f[np.asarray(at_point)])
+                pf = pf + add_rows(pf.shape[0], idx, take_rows(f, at_point))
             if at_rod:
                 idx = np.asarray(
                     [2 * ends[k].rod + (ends[k].end == "B") for k in at_rod]
                 )
-                rf = rf.at[idx].add(f[np.asarray(at_rod)])
+                rf = rf + add_rows(rf.shape[0], idx, take_rows(f, at_rod))
         kin = st.kin
         out = {
             "nodes": kin.positions,
@@ -1241,7 +1258,7 @@ class LineNetwork(AbstractModel):
             ke = 0.5 * jnp.sum(
                 jnp.einsum("ni,nij,nj->n", v, st.body_mass[: top.n_state], v)
             )
-            EAs = self.EA[top.seg_line]
+            EAs = take_rows(self.EA, top.seg_line)
             strain = jnp.maximum(st.seg_strain, 0.0)
             elastic = 0.5 * jnp.sum(EAs * st.seg_l * strain**2)
             # The potential of the constant loads (weight, buoyancy): minus their
@@ -1292,8 +1309,10 @@ class LineNetwork(AbstractModel):
             for side, idx in ((0, ends[2 * r]), (-1, ends[2 * r + 1])):
                 if idx:
                     nodes = np.asarray(idx)
-                    force = force.at[side].add(jnp.sum(st.node_force[nodes], 0))
-                    mass = mass.at[side].add(jnp.sum(st.node_mass[nodes], 0))
+                    force = force.at[side].add(
+                        jnp.sum(take_rows(st.node_force, nodes), 0)
+                    )
+                    mass = mass.at[side].add(jnp.sum(take_rows(st.node_mass, nodes), 0))
             rho = pos - a
             F6 = jnp.concatenate(
                 [jnp.sum(force, 0), jnp.sum(jnp.cross(rho, force), 0) + ld.moment]
@@ -1321,7 +1340,7 @@ class LineNetwork(AbstractModel):
             out["rod_nodes"].append(pos)
             out["rod_node_force"].append(force)
             out["rod_end_tension"].append(jnp.stack([
-                safe_norm(jnp.sum(st.node_force[np.asarray(ix, int)], 0))
+                safe_norm(jnp.sum(take_rows(st.node_force, np.asarray(ix, int)), 0))
                 if ix else jnp.zeros(()) for ix in (ends[2 * r], ends[2 * r + 1])
             ]))  # fmt: skip
         stack = {k: jnp.stack(v) for k, v in out.items()
@@ -1567,7 +1586,8 @@ def _equilibrium_residual(x, model, effects, env, t0, solve_rows):
     y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
     st = model._state(t0, y, effects, env)
     top = model.topology
-    f = jnp.zeros_like(x).at[top.tri_rows].set(st.body_force[: top.n_tri])
+    # distinct rows: added to zeros, set
+    f = add_rows(x.shape[0], top.tri_rows, st.body_force[: top.n_tri])
     return jnp.where(solve_rows[:, None], f, 0.0)
 
 
@@ -1666,7 +1686,17 @@ def _solve_equilibrium_body(x0, model, effects, env, t0, solve_rows, max_iter, t
     )
     x = jax.lax.stop_gradient(x)
     x = _newton_step(x, J, model, effects, env, t0, solve_rows)
-    return x, res, it, ftol
+    return x, res, it, ftol, rest_end_tensions(model, effects, env, t0, x)
+
+
+def rest_end_tensions(model, effects, env, t, x):
+    """Per line, the (end A, end B) tension magnitudes `(n_lines,)` at rest with
+    the state rows at positions `x` `(n, 3)`: the force each line exerts on its
+    end points (segment tension plus the end node's loads), N."""
+    y = jnp.concatenate([x, jnp.zeros_like(x)], axis=1)
+    st = model._state(t, y, effects, env)
+    fa, fb = model.end_forces(st, jnp.zeros((model.topology.n_bodies, 3)))
+    return jnp.linalg.norm(fa, axis=1), jnp.linalg.norm(fb, axis=1)
 
 
 _solve_equilibrium = cpu_jit(_solve_equilibrium_body)
@@ -1699,7 +1729,8 @@ def equilibrium(
     - `max_iter`: iteration limit. `tol`: largest position update at convergence, m.
 
     **Returns:** `(y, info)`: the state `(n, 6)` at rest and a dict with
-    `residual` (the norm of the net forces, N) and `iterations`. Raises
+    `residual` (the norm of the net forces, N), `iterations` and the lines' end
+    tensions there, `tension_a` and `tension_b` (`(n_lines,)`, N). Raises
     ValueError when the iteration does not converge.
     """
     check_choice("free_points", free_points, ("hold", "solve"))
@@ -1719,7 +1750,7 @@ def equilibrium(
         x0 = jax.lax.stop_gradient(x0)
     t0 = jnp.asarray(t0, jnp.float64)
     # a later process skips tracing the solve (`jaxstring._programs`)
-    x, res, it, ftol = _programs.call_or_jit(
+    x, res, it, ftol, (ta, tb) = _programs.call_or_jit(
         _solve_equilibrium_body,
         _solve_equilibrium,
         *(x0, model, effects, env, t0, solve_rows, max_iter, tol),
@@ -1731,4 +1762,4 @@ def equilibrium(
                 f"after {int(it)} iterations (max_iter = {max_iter})."
             )
     y = host_op(lambda xp, x: xp.concatenate([x, xp.zeros_like(x)], axis=1), x)
-    return y, {"residual": res, "iterations": it}
+    return y, {"residual": res, "iterations": it, "tension_a": ta, "tension_b": tb}

@@ -21,6 +21,7 @@ between the line's ends. End B of a line is its fairlead end (MoorDyn's FAIRTEN
 channel), end A its anchor end (ANCHTEN).
 """
 
+import collections
 import dataclasses
 import math
 import os
@@ -37,7 +38,13 @@ from .._validate import options_of, same_signature
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
 from .bodies import Body, rotation_matrix
 from .effects import Seabed
-from .models import BodyPoint, FreePoint, LineNetwork, equilibrium
+from .models import (
+    BodyPoint,
+    FreePoint,
+    LineNetwork,
+    equilibrium,
+    rest_end_tensions,
+)
 from .rigid import RigidMotion
 from .rods import Rod, RodEnd
 
@@ -976,11 +983,14 @@ def deck_scene(
     if t1 is None:
         t1 = float(times[-2]) if times is not None else t0 + 10.0
     if static:
-        y0, _ = equilibrium(model, effects, env, t0, free_points=free_points)
+        y0, info = equilibrium(model, effects, env, t0, free_points=free_points)
     else:
         y0 = initial_shape(model, effects, env, t0)
     name = os.path.splitext(os.path.basename(deck.path))[0]
-    return Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
+    scene = Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
+    if static:
+        _remember_rest_tensions(scene, info["tension_a"], info["tension_b"])
+    return scene
 
 
 def _without_added_mass(model):
@@ -1072,14 +1082,29 @@ same_signature(read_moordyn, deck_scene)
 
 @cpu_jit
 def _rest_observables(scene):
-    model = scene.model
-    y = scene.y0.at[:, 3:].set(0.0)
-    st = model._state(scene.t0, y, scene.effects, scene.env)
-    st = eqx.tree_at(lambda s: s.held_acc, st, jnp.zeros_like(st.held_acc))
-    zero = jnp.zeros((model.topology.n_bodies, 3))
-    fa, fb = model.end_forces(st, zero)
-    return {"tension_a": jnp.linalg.norm(fa, axis=1),
-            "tension_b": jnp.linalg.norm(fb, axis=1)}  # fmt: skip
+    ta, tb = rest_end_tensions(
+        scene.model, scene.effects, scene.env, scene.t0, scene.y0[:, :3]
+    )
+    return {"tension_a": ta, "tension_b": tb}
+
+
+# The end tensions the static solve of `deck_scene` found for the last few scenes
+# it built: `static_tensions` of such a scene, unchanged (the same initial state,
+# model, effects, environment and start time objects), reads them instead of
+# compiling `_rest_observables`.
+_REST_TENSIONS = collections.deque(maxlen=8)
+
+
+def _remember_rest_tensions(scene, ta, tb):
+    _REST_TENSIONS.append((scene, ta, tb))
+
+
+def _remembered_rest_tensions(scene):
+    fields = lambda s: (s.y0, s.model, s.effects, s.env, s.t0)  # noqa: E731
+    for sc, ta, tb in reversed(_REST_TENSIONS):
+        if all(a is b for a, b in zip(fields(sc), fields(scene))):
+            return {"tension_a": ta, "tension_b": tb}
+    return None
 
 
 def static_tensions(scene: Scene) -> dict:
@@ -1092,7 +1117,7 @@ def static_tensions(scene: Scene) -> dict:
         raise ValueError(
             f"`scene` must hold a LineNetwork; got {type(model).__name__}."
         )
-    obs = _rest_observables(scene)
+    obs = _remembered_rest_tensions(scene) or _rest_observables(scene)
     ids = model.line_ids or tuple(range(1, model.n_lines + 1))
     ta, tb = np.asarray(obs["tension_a"]), np.asarray(obs["tension_b"])
     return {lid: (float(ta[k]), float(tb[k])) for k, lid in enumerate(ids)}

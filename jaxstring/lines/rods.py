@@ -235,7 +235,7 @@ def rod_loads(rod: Rod, end_a, axis, vel_a, omega, t, env, loads):
     ez = jnp.array([0.0, 0.0, 1.0])
     qxz = jnp.cross(q, ez)
     if "gravity" in loads:
-        f = f.at[:, 2].add(-m * g)
+        f = f - (m * g)[:, None] * ez
     if "buoyancy" in loads:
         f = f + (vof * vol * rho * g)[:, None] * (ez - cos_phi * q)
         sign = np.zeros(N + 1)
@@ -267,7 +267,7 @@ def rod_loads(rod: Rod, end_a, axis, vel_a, omega, t, env, loads):
         delta = (-bed.depth - z) / bed.eps
         pen = bed.eps * jax.nn.softplus(delta)
         fz = (bed.kBot * pen - bed.cBot * v[:, 2] * jax.nn.sigmoid(delta)) * d * dL
-        f = f.at[:, 2].add(fz)
+        f = f + fz[:, None] * ez
     total = rod.w * L
     a2 = (0.5 * d) ** 2
     Irc = total * (a2 / 4 - L**2 / (6 * N**2))

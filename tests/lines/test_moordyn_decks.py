@@ -197,6 +197,16 @@ def test_wd0050_static_tensions(wd0050):
     assert abs(fa[0] + fb[0]) < 1e-6 * abs(fb[0])
     nodes = np.asarray(obs["nodes"])
     assert np.min(nodes[:, 2]) > -50.2  # seabed penetration ~ w/(kBot d) = 0.13 m
+    # the static solve's own end tensions are those of the state it returned
+    fresh = lines.moordyn._rest_observables(wd0050)
+    np.testing.assert_allclose((ta, tb), (fresh["tension_a"][0], fresh["tension_b"][0]),
+                               rtol=1e-12)  # fmt: skip
+    # a scene changed after the read gets its own tensions: twice the axial
+    # stiffness at the same shape, about twice the segment tension (the end
+    # nodes' weight, 2 % of it, unchanged)
+    stiff = eqx.tree_at(lambda s: s.model.EA, wd0050, wd0050.model.EA * 2)
+    ta2, tb2 = lines.static_tensions(stiff)[1]
+    assert abs(ta2 / ta - 2) < 0.05 and abs(tb2 / tb - 2) < 0.05
 
 
 def test_static_gradients(wd0050):

@@ -1,0 +1,60 @@
+"""Static index arrays as slices (`_arrays.take_rows`, `add_rows`): equal to the
+gather and the scatter they replace for every pattern of rows, and the line
+networks' vector field free of gathers and scatters."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxstring import _arrays, lines
+
+
+PATTERNS = [
+    np.arange(6),  # one run
+    np.array([3, 0, 1, 2, 3, 3, 4]),  # a network's node -> slot map
+    np.array([1, 2, 3, 4, 5, 5]),  # `next` of a line (its end repeated)
+    np.array([0, 0, 1, 2, 3]),  # `prev`
+    np.array([2, 2, 2, 2]),  # one repeated row (a line's parameter per segment)
+    np.array([5, 4, 3, 1]),  # descending
+    np.array([6, 4, 2, 0, 1, 4]),  # strided runs (a state ordered for a narrow band)
+    np.random.default_rng(0).integers(0, 7, size=40),  # many runs
+]
+
+
+@pytest.mark.parametrize("max_runs", [4, 64])
+@pytest.mark.parametrize("idx", PATTERNS)
+def test_take_and_add_rows_equal_the_gather_and_the_scatter(idx, max_runs, monkeypatch):
+    monkeypatch.setattr(_arrays, "MAX_RUNS", max_runs)  # slices, or a gather
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(7, 3))
+    np.testing.assert_array_equal(_arrays.take_rows(jnp.asarray(x), idx), x[idx])
+    v = rng.normal(size=(idx.size, 3, 2))
+    ref = np.zeros((7, 3, 2))
+    np.add.at(ref, idx, v)
+    np.testing.assert_allclose(_arrays.add_rows(7, idx, jnp.asarray(v)), ref,
+                               rtol=1e-15, atol=1e-15)  # fmt: skip
+    # forward-mode derivatives (the banded Jacobians' JVPs) are the same maps
+    t = rng.normal(size=x.shape)
+    _, dx = jax.jvp(lambda a: _arrays.take_rows(a, idx), (jnp.asarray(x),),
+                    (jnp.asarray(t),))  # fmt: skip
+    np.testing.assert_array_equal(dx, t[idx])
+
+
+def _primitives(jaxpr, out):
+    for e in jaxpr.eqns:
+        out.add(e.primitive.name)
+        for sub in jax.extend.core.jaxprs_in_params(e.params):
+            _primitives(sub, out)
+    return out
+
+
+def test_a_single_lines_vector_field_has_no_gather_or_scatter():
+    """MoorDyn's WD0050 and WD0200 chains: every index array of the topology is
+    a few runs of rows."""
+    for deck in ("WD0050_Chain.txt", "WD0200_Chain.txt"):
+        scene = lines.deck_scene(lines.parse_moordyn(lines.case_path(deck)),
+                                 static=False)  # fmt: skip
+        jaxpr = jax.make_jaxpr(lambda y: scene.vector_field(0.0, y))(scene.y0)
+        found = _primitives(jaxpr.jaxpr, set())
+        assert not found & {"gather", "scatter", "scatter-add", "scatter_add"}, deck
