@@ -1,5 +1,6 @@
 """Array helpers every system shares: float64 conversion, parameter fields, dots,
-and NumPy stand-ins for small operations on concrete arrays."""
+NumPy stand-ins for small operations on concrete arrays, and static index arrays
+read and summed as slices (`take_rows`, `add_rows`)."""
 
 import equinox as eqx
 import jax
