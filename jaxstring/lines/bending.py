@@ -53,14 +53,18 @@ def bending_forces(qs, lstr, EI_seg, bend, t_a, t_b, n_nodes):
     """
     # static index arrays as slices where they are runs (`take_rows`, `add_rows`);
     # the nodes of the three groups are distinct, so the curvatures add up
-    take = take_rows
     f = jnp.zeros((n_nodes, 3))
     K = jnp.zeros(n_nodes)
     if len(bend.inner_node):
         sp, sn = bend.inner_prev, bend.inner_next
-        q_p, q_n, l_p, l_n = take(qs, sp), take(qs, sn), take(lstr, sp), take(lstr, sn)
+        q_p, q_n, l_p, l_n = (
+            take_rows(qs, sp),
+            take_rows(qs, sn),
+            take_rows(lstr, sp),
+            take_rows(lstr, sn),
+        )
         Kp = curvature_vectors(q_p, q_n, l_p + l_n)
-        EI = take(EI_seg, sp)
+        EI = take_rows(EI_seg, sp)
         fm = (EI / l_p)[:, None] * jnp.cross(q_p, Kp)
         fp = (EI / l_n)[:, None] * jnp.cross(q_n, Kp)
         m = bend.inner_node
@@ -69,17 +73,17 @@ def bending_forces(qs, lstr, EI_seg, bend, t_a, t_b, n_nodes):
         K = K + add_rows(n_nodes, m, _norm(Kp))
     if len(bend.clamp_a_node):
         s = bend.clamp_a_seg
-        q_s, l_s = take(qs, s), take(lstr, s)
+        q_s, l_s = take_rows(qs, s), take_rows(lstr, s)
         Kp = curvature_vectors(t_a, q_s, l_s)
-        fp = (take(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
+        fp = (take_rows(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
         m = bend.clamp_a_node
         f = f + add_rows(n_nodes, m + 1, fp) - add_rows(n_nodes, m, fp)
         K = K + add_rows(n_nodes, m, _norm(Kp))
     if len(bend.clamp_b_node):
         s = bend.clamp_b_seg
-        q_s, l_s = take(qs, s), take(lstr, s)
+        q_s, l_s = take_rows(qs, s), take_rows(lstr, s)
         Kp = curvature_vectors(q_s, t_b, l_s)
-        fm = (take(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
+        fm = (take_rows(EI_seg, s) / l_s)[:, None] * jnp.cross(q_s, Kp)
         m = bend.clamp_b_node
         f = f + add_rows(n_nodes, m - 1, fm) - add_rows(n_nodes, m, fm)
         K = K + add_rows(n_nodes, m, _norm(Kp))

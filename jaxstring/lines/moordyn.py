@@ -989,7 +989,7 @@ def deck_scene(
     name = os.path.splitext(os.path.basename(deck.path))[0]
     scene = Scene(model, effects, y0, t1=t1, t0=t0, name=name, env=env)
     if static:
-        _remember_rest_tensions(scene, info["tension_a"], info["tension_b"])
+        _REST_TENSIONS.append((scene, info["tension_a"], info["tension_b"]))
     return scene
 
 
@@ -1092,11 +1092,7 @@ def _rest_observables(scene):
 # it built: `static_tensions` of such a scene, unchanged (the same initial state,
 # model, effects, environment and start time objects), reads them instead of
 # compiling `_rest_observables`.
-_REST_TENSIONS = collections.deque(maxlen=8)
-
-
-def _remember_rest_tensions(scene, ta, tb):
-    _REST_TENSIONS.append((scene, ta, tb))
+_REST_TENSIONS = collections.deque(maxlen=8)  # (scene, tension_a, tension_b)
 
 
 def _remembered_rest_tensions(scene):
