@@ -1,8 +1,8 @@
 """Equilibria, linear stability and limit cycles of the vessel models.
 
 * `find_equilibria(scene)`: all static equilibria from a grid of starts (spec S1),
-  solved with optimistix under `vmap`, de-duplicated and classified by the
-  eigenvalues of the `jacfwd` Jacobian (spec S2).
+  solved by Newton's method over the batch of starts, de-duplicated and
+  classified by the eigenvalues of the `jacfwd` Jacobian (spec S2).
 * `solve_equilibrium(scene, q0)`: one equilibrium from one start (continuation).
 * `stability(scene, y)`: eigenvalues and class of one equilibrium.
 * `measure_limit_cycle(traj, t_from)`: period, yaw amplitudes, span and tension
@@ -57,15 +57,35 @@ def q_from_state(y, n):
     return jnp.concatenate([eta[:, :2] / LSCALE, eta[:, 2:]], axis=1).reshape(-1)
 
 
+def _load_scale(scene):
+    """Per equilibrium equation: body mass over the load scale, so that the scaled
+    residual is the body load (at zero velocity nu_dot = M^{-1} tau exactly: the
+    Coriolis terms vanish)."""
+    h = scene.model.hulls()
+    m = jnp.stack([h.m11, h.m22, h.m66], axis=1)
+    return (m / jnp.array([FSCALE, FSCALE, FSCALE * LSCALE])).reshape(-1)
+
+
 def residual(q, scene: Scene):
     """Scaled body loads at the zero-velocity state of `q` (zero at equilibrium)."""
     n = _n(scene)
-    y = state_from_q(q, n)
-    f = scene.vector_field(0.0, y).reshape(n, 6)[:, 3:]
-    h = scene.model.hulls()
-    # At zero velocity nu_dot = M^{-1} tau exactly (the Coriolis terms vanish).
-    tau = f * jnp.stack([h.m11, h.m22, h.m66], axis=1)
-    return (tau / jnp.array([FSCALE, FSCALE, FSCALE * LSCALE])).reshape(-1)
+    f = scene.vector_field(0.0, state_from_q(q, n)).reshape(n, 6)[:, 3:]
+    return f.reshape(-1) * _load_scale(scene)
+
+
+def _linearised(scene, q):
+    """The residual at `q`, its Jacobian d residual / dq, and the vector field's
+    Jacobian dF/dX at the zero-velocity state of `q`, from one `jacfwd` of the
+    vector field (the residual is its acceleration rows, the unknowns its position
+    columns, both scaled)."""
+    n = _n(scene)
+    both = lambda y: (lambda f: (f, f))(scene.vector_field(0.0, y))  # noqa: E731
+    jac, f = jax.jacfwd(both, has_aux=True)(state_from_q(q, n))
+    w = _load_scale(scene)
+    dy_dq = jnp.tile(jnp.array([LSCALE, LSCALE, 1.0]), n)
+    r = f.reshape(n, 6)[:, 3:].reshape(-1) * w
+    block = jac.reshape(n, 6, n, 6)[:, 3:, :, :3].reshape(3 * n, 3 * n)
+    return r, block * w[:, None] * dy_dq, jac
 
 
 # Equilibrium solvers (static choice). Newton jumps far from its start and finds
@@ -86,7 +106,46 @@ def _check_method(method):
         raise ValueError(f"`method` must be one of {sorted(_METHODS)}; got {method!r}.")
 
 
+def _newton_batch(scene, q0s, rtol, atol, max_steps):
+    """Newton's method from every start `q0s` (shape `(B, 3 n)`) at once: the
+    iterates and the termination of `optimistix.Newton` (Cauchy test: the step
+    within `atol + rtol |q|` and the residual within `atol`, both in the max norm;
+    a non-finite iterate or step fails the start), written over the batch.
+
+    The loop runs on the stacked starts, each frozen once it has stopped, rather
+    than under `vmap`: a vmapped `while_loop` is traced again to batch its body,
+    and optimistix's iteration traced 1.9 s of the 2.8 s that `find_equilibria`
+    traced. Each pass evaluates the residual and both Jacobians at every start
+    (`_linearised`); a last pass after the final step leaves them at the solutions.
+    Returns (solutions, converged mask, max |residual|, dF/dX at each solution)."""
+    lin = jax.vmap(lambda q: _linearised(scene, q))
+
+    def body(carry):
+        q, k, done, failed = carry[:4]
+        active = ~(done | failed) & (k < max_steps)
+        f, jac, jac_y = lin(q)
+        step = jnp.linalg.solve(jac, f[..., None])[..., 0]
+        small_step = jnp.max(jnp.abs(step) / (atol + rtol * jnp.abs(q)), axis=1) < 1
+        small_f = jnp.max(jnp.abs(f), axis=1) < atol
+        bad = ~(jnp.all(jnp.isfinite(step), axis=1) & jnp.all(jnp.isfinite(q), axis=1))
+        q = jnp.where(active[:, None], q - step, q)
+        done = done | (active & ~bad & small_step & small_f)
+        failed = failed | (active & bad)
+        return q, k + 1, done, failed, jnp.any(active), f, jac_y
+
+    def cond(carry):
+        return carry[4]
+
+    b, m = q0s.shape
+    none = jnp.zeros(b, dtype=bool)
+    carry = (q0s, 0, none, none, True, jnp.zeros((b, m)), jnp.zeros((b, 2 * m, 2 * m)))
+    q, _, done, _, _, f, jac_y = jax.lax.while_loop(cond, body, carry)
+    return q, done, jnp.max(jnp.abs(f), axis=1), jac_y
+
+
 def _solve_batch_body(scene, q0s, rtol, atol, max_steps, method="newton"):
+    if method == "newton":
+        return _newton_batch(scene, q0s, rtol, atol, max_steps)[:3]
     cls, use_flag = _METHODS[method]
     solver = cls(rtol=rtol, atol=atol)
 
@@ -108,8 +167,9 @@ _solve_batch = cpu_jit(_solve_batch_body)
 def solve_equilibria(
     scene: Scene, q0s, rtol=1e-10, atol=1e-10, max_steps=200, method="newton"
 ):
-    """Equilibrium solves from a batch of starts `q0s` (shape `(B, 3 n)`), under
-    vmap; `method` is `'newton'`, `'dogleg'` or `'lm'` (see `find_equilibria`).
+    """Equilibrium solves from a batch of starts `q0s` (shape `(B, 3 n)`), all in
+    one compiled call; `method` is `'newton'`, `'dogleg'` or `'lm'` (see
+    `find_equilibria`).
 
     Returns (states `(B, 6 n)`, converged mask, max |residual|)."""
     _check_method(method)
@@ -237,16 +297,22 @@ def _hawser(scene):
 def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
     """Solve from all starts and evaluate tension, clearance and Jacobian of each
     solution (the body of `_equilibria_map`'s compiled call)."""
-    q, ok, res = _solve_batch_body(scene, q0s, rtol, atol, max_steps, method)
+    if method == "newton":
+        q, ok, res, J = _newton_batch(scene, q0s, rtol, atol, max_steps)
+    else:
+        q, ok, res = _solve_batch_body(scene, q0s, rtol, atol, max_steps, method)
+        J = None
     hawser = _hawser(scene)
     ys = jax.vmap(lambda q: state_from_q(q, 2))(q)
 
     def props(y):
         eta = y.reshape(2, 6)[:, :3]
         T = hawser.tension(scene.model, eta, jnp.zeros((2, 3)))
-        return T, hull_clearance(scene.model, eta), _jacobian(scene, y)
+        return T, hull_clearance(scene.model, eta)
 
-    T, clr, J = jax.vmap(props)(ys)
+    T, clr = jax.vmap(props)(ys)
+    if J is None:
+        J = jax.vmap(lambda y: _jacobian(scene, y))(ys)
     return ys, ok & (res < 1e-6), T, clr, J
 
 
@@ -263,6 +329,17 @@ def _equilibria_map_body(scenes, n_grid, rtol, atol, max_steps, method):
 
 
 _equilibria_map = cpu_jit(_equilibria_map_body)
+
+
+def _equilibria_one_body(scene, n_grid, rtol, atol, max_steps, method):
+    """`_equilibria_batch` from the `grid_starts` of one scene: the program of
+    `find_equilibria`, without the scenes' `vmap` (batching the solves for a batch
+    of one traced them 0.8 s longer)."""
+    q0s = grid_starts(scene, n_grid)
+    return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
+
+
+_equilibria_one = cpu_jit(_equilibria_one_body)
 
 
 def _collect(ys, ok, T, clr, J, taut_tension):
@@ -339,10 +416,16 @@ def find_equilibria_map(scenes, **options):
 
 def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     _check_method(method)
+    options = (n_grid, rtol, atol, max_steps, method)
+    # a later process skips tracing the solves (`jaxstring._programs`)
+    if len(scenes) == 1:
+        out = _programs.call_or_jit(
+            _equilibria_one_body, _equilibria_one, scenes[0], *options
+        )
+        return [_collect(*out, taut_tension)]
     batch = jax.tree_util.tree_map(
         lambda *a: host_op(lambda xp, *a: xp.stack(a), *a), *scenes
     )
-    # a later process skips tracing the solves (`jaxstring._programs`)
     out = _programs.call_or_jit(
         _equilibria_map_body,
         _equilibria_map,

@@ -9,6 +9,7 @@ import math
 import os
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._arrays import host_op
@@ -101,11 +102,13 @@ def _mooring_offset(mooring, F, heading=0.0):
     force along the heading's unit vector with the turret at -r times it."""
     if isinstance(mooring, TurretLines):
         return mooring.offset_for_force(F, heading)
-    r = F / mooring.k_m
-    for _ in range(40):
-        g = mooring.k_m * (1 + r**2 / mooring.rho_m**2) * r - F
-        r = r - g / (mooring.k_m * (1 + 3 * r**2 / mooring.rho_m**2))
-    return r
+    k, rho2 = mooring.k_m, mooring.rho_m**2
+
+    def newton(_, r):
+        g = k * (1 + r**2 / rho2) * r - F
+        return r - g / (k * (1 + 3 * r**2 / rho2))
+
+    return jax.lax.fori_loop(0, 40, newton, F / k)
 
 
 def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
