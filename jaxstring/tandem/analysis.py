@@ -73,19 +73,30 @@ def residual(q, scene: Scene):
     return f.reshape(-1) * _load_scale(scene)
 
 
-def _linearised(scene, q):
-    """The residual at `q`, its Jacobian d residual / dq, and the vector field's
-    Jacobian dF/dX at the zero-velocity state of `q`, from one `jacfwd` of the
-    vector field (the residual is its acceleration rows, the unknowns its position
-    columns, both scaled)."""
+def _linearised(scene, q, full):
+    """The residual at `q` and its Jacobian d residual / dq from one `jacfwd` of
+    the vector field at the zero-velocity state of `q` (the residual is its
+    acceleration rows, the unknowns its position columns, both scaled); `full`:
+    also the vector field's whole Jacobian dF/dX there (its velocity columns too)."""
     n = _n(scene)
-    both = lambda y: (lambda f: (f, f))(scene.vector_field(0.0, y))  # noqa: E731
-    jac, f = jax.jacfwd(both, has_aux=True)(state_from_q(q, n))
-    w = _load_scale(scene)
+    vf = lambda y: scene.vector_field(0.0, y)  # noqa: E731
+    y = state_from_q(q, n)
     dy_dq = jnp.tile(jnp.array([LSCALE, LSCALE, 1.0]), n)
+    w = _load_scale(scene)
+    if full:
+        jac, f = jax.jacfwd(lambda y: (lambda f: (f, f))(vf(y)), has_aux=True)(y)
+        dpos = jac.reshape(n, 6, n, 6)[:, :, :, :3].reshape(6 * n, 3 * n) * dy_dq
+    else:
+        # the position columns only: six directions in place of twelve
+        pos = (6 * jnp.arange(n)[:, None] + jnp.arange(3)).reshape(-1)
+        tangents = jnp.zeros((3 * n, 6 * n)).at[jnp.arange(3 * n), pos].set(dy_dq)
+        f, dpos = jax.vmap(lambda t: jax.jvp(vf, (y,), (t,)), out_axes=(None, 1))(
+            tangents
+        )
+        jac = None
     r = f.reshape(n, 6)[:, 3:].reshape(-1) * w
-    block = jac.reshape(n, 6, n, 6)[:, 3:, :, :3].reshape(3 * n, 3 * n)
-    return r, block * w[:, None] * dy_dq, jac
+    block = dpos.reshape(n, 6, 3 * n)[:, 3:].reshape(3 * n, 3 * n)
+    return r, block * w[:, None], jac
 
 
 # Equilibrium solvers (static choice). Newton jumps far from its start and finds
@@ -106,19 +117,27 @@ def _check_method(method):
         raise ValueError(f"`method` must be one of {sorted(_METHODS)}; got {method!r}.")
 
 
-def _newton_batch(scene, q0s, rtol, atol, max_steps):
+def _newton_batch(scene, q0s, rtol, atol, max_steps, jacobian=None):
     """Newton's method from every start `q0s` (shape `(B, 3 n)`) at once: the
     iterates and the termination of `optimistix.Newton` (Cauchy test: the step
     within `atol + rtol |q|` and the residual within `atol`, both in the max norm;
     a non-finite iterate or step fails the start), written over the batch.
 
     The loop runs on the stacked starts, each frozen once it has stopped, rather
-    than under `vmap`: a vmapped `while_loop` is traced again to batch its body,
-    and optimistix's iteration traced 1.9 s of the 2.8 s that `find_equilibria`
-    traced. Each pass evaluates the residual and both Jacobians at every start
-    (`_linearised`); a last pass after the final step leaves them at the solutions.
-    Returns (solutions, converged mask, max |residual|, dF/dX at each solution)."""
-    lin = jax.vmap(lambda q: _linearised(scene, q))
+    than under `vmap`: a vmapped `while_loop` is traced again to batch its body.
+    A last pass after the final step evaluates the residual at the solutions.
+
+    `jacobian`: where the vector field's whole Jacobian dF/dX at the solutions
+    comes from (for their stability). "loop": every pass takes it (the Newton
+    matrix is its position columns), the last pass at the solutions: one
+    linearisation in the program, the smaller compilation (one scene). "after":
+    the passes take the position columns only and one more linearisation takes
+    it at the solutions: two in the program, the faster run (a batch of scenes;
+    performance.md, "The tandem's equilibria"). None: not needed.
+
+    Returns (solutions, converged mask, max |residual|, dF/dX at each solution
+    or None)."""
+    lin = jax.vmap(lambda q: _linearised(scene, q, jacobian == "loop"))
 
     def body(carry):
         q, k, done, failed = carry[:4]
@@ -138,8 +157,11 @@ def _newton_batch(scene, q0s, rtol, atol, max_steps):
 
     b, m = q0s.shape
     none = jnp.zeros(b, dtype=bool)
-    carry = (q0s, 0, none, none, True, jnp.zeros((b, m)), jnp.zeros((b, 2 * m, 2 * m)))
+    jac_y = jnp.zeros((b, 2 * m, 2 * m)) if jacobian == "loop" else None
+    carry = (q0s, 0, none, none, True, jnp.zeros((b, m)), jac_y)
     q, _, done, _, _, f, jac_y = jax.lax.while_loop(cond, body, carry)
+    if jacobian == "after":
+        jac_y = jax.vmap(lambda q: _linearised(scene, q, True)[2])(q)
     return q, done, jnp.max(jnp.abs(f), axis=1), jac_y
 
 
@@ -294,11 +316,12 @@ def _hawser(scene):
     return hs[0]
 
 
-def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton"):
+def _equilibria_batch(scene, q0s, rtol, atol, max_steps, method="newton", jac="loop"):
     """Solve from all starts and evaluate tension, clearance and Jacobian of each
-    solution (the body of `_equilibria_map`'s compiled call)."""
+    solution (the body of `find_equilibria`'s compiled call; `jac` as
+    `_newton_batch`'s `jacobian`)."""
     if method == "newton":
-        q, ok, res, J = _newton_batch(scene, q0s, rtol, atol, max_steps)
+        q, ok, res, J = _newton_batch(scene, q0s, rtol, atol, max_steps, jac)
     else:
         q, ok, res = _solve_batch_body(scene, q0s, rtol, atol, max_steps, method)
         J = None
@@ -323,7 +346,7 @@ def _equilibria_map_body(scenes, n_grid, rtol, atol, max_steps, method):
 
     def one(scene):
         q0s = grid_starts(scene, n_grid)
-        return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
+        return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method, "after")
 
     return eqx.filter_vmap(one)(scenes)
 
