@@ -454,12 +454,14 @@ class Hawser(AbstractVesselLoad):
 
     def stretch_for_tension(self, T):
         """Stretch d - l0 (m) at which the hawser carries tension `T` (N)."""
+
         # Newton on the cubic for d+, then invert the softplus.
-        dp = T / self.k_h
-        for _ in range(30):
+        def newton(_, dp):
             g = self.k_h * dp * (1 + (dp / self.delta_h) ** 2) - T
             dg = self.k_h * (1 + 3 * (dp / self.delta_h) ** 2)
-            dp = dp - g / dg
+            return dp - g / dg
+
+        dp = jax.lax.fori_loop(0, 30, newton, T / self.k_h)
         z = dp / self.s
         return self.s * (z + jnp.log(-jnp.expm1(-z)))
 
