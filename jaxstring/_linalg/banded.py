@@ -480,12 +480,15 @@ def small_inv(a):
 
 def pivoted_inverse(a):
     """Inverse of a batch of small matrices `(..., B, B)` by Gauss-Jordan elimination
-    with partial pivoting, unrolled over the B columns, with the batch as the last
+    with partial pivoting, a loop over the B columns, with the batch as the last
     (contiguous) axis so that every operation is vectorised over the batch.
 
     XLA:CPU lowers ``jnp.linalg.inv`` to one LAPACK call per matrix of the batch;
     for the 5 x 5 ... 8 x 8 blocks of a string these elementwise ops (which XLA
-    fuses) are faster.
+    fuses) are faster. The columns are a `fori_loop`, not unrolled: block cyclic
+    reduction inverts at each of its levels, and the unrolled eliminations made a
+    quarter of a natural-variables solve's compilation, for the same run time
+    (docs/numerics.md, "Banded linear algebra").
     """
     B = a.shape[-1]
     batch = a.shape[:-2]
@@ -493,15 +496,22 @@ def pivoted_inverse(a):
     eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype)[:, :, None], x.shape)
     m = jnp.concatenate([x, eye], axis=1)  # (B, 2B, m): [a | I] per batch member
     rows = jnp.arange(B)[:, None]
-    for j in range(B):
+
+    def column(j, m):
         # Pivot: the largest |entry| of column j in rows j..B-1, swapped into row j.
-        col = jnp.where(rows >= j, jnp.abs(m[:, j, :]), -1.0)  # (B, m)
+        col = lax.dynamic_index_in_dim(m, j, axis=1, keepdims=False)  # (B, m)
+        col = jnp.where(rows >= j, jnp.abs(col), -1.0)
         onehot = (rows == jnp.argmax(col, axis=0)[None, :]).astype(a.dtype)
         row_p = jnp.sum(onehot[:, None, :] * m, axis=0)  # (2B, m)
-        m = m + onehot[:, None, :] * (m[j] - row_p)[None]
-        row_p = row_p / row_p[j][None]
-        factor_ = jnp.where(rows == j, 0.0, m[:, j, :])  # (B, m)
-        m = (m - factor_[:, None, :] * row_p[None]).at[j].set(row_p)
+        row_j = lax.dynamic_index_in_dim(m, j, axis=0, keepdims=False)
+        m = m + onehot[:, None, :] * (row_j - row_p)[None]
+        row_p = row_p / lax.dynamic_index_in_dim(row_p, j, axis=0)
+        col = lax.dynamic_index_in_dim(m, j, axis=1, keepdims=False)
+        factor_ = jnp.where(rows == j, 0.0, col)  # (B, m)
+        m = m - factor_[:, None, :] * row_p[None]
+        return jnp.where((rows == j)[:, :, None], row_p[None], m)
+
+    m = lax.fori_loop(0, B, column, m)
     return jnp.moveaxis(m[:, B:, :], -1, 0).reshape(batch + (B, B))
 
 
