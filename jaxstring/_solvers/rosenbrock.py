@@ -177,15 +177,6 @@ class _VF(eqx.Module):
         return terms.vf(t, y, args)
 
 
-def _combine(coeffs, ks):
-    """sum_j coeffs[j] ks[j] over the nonzero coefficients (trace-time constants)."""
-    out = None
-    for c, k in zip(coeffs, ks):
-        if c != 0.0:
-            out = c * k if out is None else out + c * k
-    return out
-
-
 class Rodas5P(OneStepODESolver, dfx.AbstractAdaptiveSolver):
     """Rodas5P (Steinebach 2023): Rosenbrock-Wanner, order 5(4), stiffly accurate,
     one Jacobian and one factorisation per step.
@@ -222,23 +213,22 @@ class Rodas5P(OneStepODESolver, dfx.AbstractAdaptiveSolver):
         # df/dt by one JVP in t (zero for autonomous scenes, and cheap).
         _, dT = jax.jvp(lambda t: terms.vf(t, y0, args), (t0,), (jnp.ones_like(t0),))
         fac = _linalg.factor(jac.scale_shift(1.0 / (h * _GAMMA), -1.0))
-        ks = []
-        for i in range(8):
-            if i == 0:
-                fi = f0
-            else:
-                yi = y0 + _combine(_A[i, :i], ks)
-                fi = terms.vf(t0 + _c[i] * h, yi, args)
-            rhs = fi
-            cc = _combine(_C[i, :i] / 1.0, ks) if i > 0 else None
-            if cc is not None:
-                rhs = rhs + cc / h
-            if _d[i] != 0.0:
-                rhs = rhs + (h * _d[i]) * dT
-            ks.append(fac.solve(rhs))
-        y1 = y0 + _combine(_B, ks)
+        # Stage 1 from f0; stages 2-8 in one loop over the tableau's rows, so that
+        # the program holds one vector field and one solve, not seven and eight.
+        k0 = fac.solve(f0 + (h * _d[0]) * dT)
+        ks = jnp.zeros((8,) + k0.shape, k0.dtype).at[0].set(k0)
+        A, C, c, d = (jnp.asarray(x) for x in (_A, _C, _c, _d))
+
+        def stage(i, ks):
+            yi = y0 + jnp.tensordot(A[i], ks, axes=1)
+            fi = terms.vf(t0 + c[i] * h, yi, args)
+            rhs = fi + jnp.tensordot(C[i], ks, axes=1) / h + (h * d[i]) * dT
+            return ks.at[i].set(fac.solve(rhs))
+
+        ks = jax.lax.fori_loop(1, 8, stage, ks)
+        y1 = y0 + jnp.tensordot(jnp.asarray(_B), ks, axes=1)
         y_error = ks[7]
-        q = jnp.stack([_combine(_H[r], ks) for r in range(3)])
+        q = jnp.tensordot(jnp.asarray(_H), ks, axes=1)
         finite = jnp.all(jnp.isfinite(y1)) & jnp.all(jnp.isfinite(y_error))
         y_error = jnp.where(finite, y_error, jnp.inf)
         dense_info = dict(y0=y0, y1=y1, q=q)
