@@ -76,6 +76,8 @@ class _ThetaResidual(eqx.Module):
     def __call__(self, dy, a):
         t1, y0, h, f0, terms, args = a
         f1 = terms.vf(t1, y0 + dy, args)
+        if f0 is None:  # theta = 1: implicit Euler
+            return dy - h * f1
         return dy - h * (self.theta * f1 + (1 - self.theta) * f0)
 
 
@@ -160,18 +162,20 @@ def _newton(
             bar = fac.solve(fn(x_new))
             return x_new, bar, scaled(x_new, x_new - bar)
 
+        # The full step (lam = 1) is the loop's first trial, so that the program
+        # holds one trial (a vector field and a solve), not two.
         def damp_cond(c):
-            lam, _, _, bar_size = c
-            return (bar_size > (1 - lam / 2) * size) & (lam > 1 / 64) & (size > kappa)
+            lam, _, _, bar_size, tried = c
+            more = (bar_size > (1 - lam / 2) * size) & (lam > 1 / 64) & (size > kappa)
+            return ~tried | more
 
         def damp_body(c):
-            lam = c[0] / 2
-            return (lam, *trial(lam))
+            lam = jnp.where(c[4], c[0] / 2, c[0])
+            return (lam, *trial(lam), True)
 
         one = jnp.ones((), size.dtype)
-        _, x_new, bar, bar_size = lax.while_loop(
-            damp_cond, damp_body, (one, *trial(one))
-        )
+        start = (one, x, jnp.zeros_like(dx), jnp.asarray(jnp.inf, size.dtype), False)
+        _, x_new, bar, bar_size, _ = lax.while_loop(damp_cond, damp_body, start)
         if early_stop:
             # The simplified correction `bar` at x_new is already computed (for
             # the damping test). When it is below kappa -- the test a full Newton
@@ -309,7 +313,8 @@ class ThetaMethod(_NewtonFixedStep):
     @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         h = t1 - t0
-        f0 = terms.vf(t0, y0, args)
+        # Implicit Euler (theta = 1) does not use f(t0, y0): not evaluated.
+        f0 = None if float(self.theta) == 1.0 else terms.vf(t0, y0, args)
         a = (t1, y0, h, f0, terms, args)
         res = _ThetaResidual(self.theta)
         if self._extrapolate:
