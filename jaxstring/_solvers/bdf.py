@@ -419,26 +419,30 @@ class BDF(dfx.AbstractAdaptiveSolver):
             stale_c = (jnp.abs(c / st.c_lu - 1) > _REFACTOR_CHANGE) & ~skip
             lu0 = lax.stop_gradient(st.lu)
             c_lu0 = lax.stop_gradient(st.c_lu)
+
             # First the stored factorisation, unless it is being skipped or c has
-            # changed; then, if that did not converge, a fresh one. (One fresh
-            # factorisation in the program, not one per case: each is a Jacobian
-            # and a block cyclic reduction, a few hundred XLA operations.)
-            d_a, conv_a, k_a = lax.cond(
-                skip | stale_c,
-                lambda: (d0, jnp.array(False), jnp.array(0, jnp.int32)),
-                lambda: newton(fn, d0, lu0, c_lu0),
-            )
+            # changed; then, if that did not converge, a fresh one: two attempts
+            # of one loop, so that the program holds one factorisation and one
+            # Newton iteration, not one per case (a Jacobian and a factorisation
+            # are a few hundred XLA operations, an iteration a vector field and a
+            # solve).
+            def attempt(carry):
+                n, _, _, _, lu, c_lu, stored_ok = carry
+                fresh = n > 0
+                lu = lax.cond(fresh, fresh_factor, lambda: lu)
+                c_lu = jnp.where(fresh, c, c_lu)
+                d, conv, k = newton(fn, d0, lu, c_lu)
+                return n + 1, d, conv, k, lu, c_lu, stored_ok | (~fresh & conv)
 
-            def refresh():
-                lu = fresh_factor()
-                d, conv, k = newton(fn, d0, lu, c)
-                return d, conv, k, lu, c
+            def again(carry):
+                n, _, conv = carry[:3]
+                return (n == 0) | ((n == 1) & ~conv)
 
-            def keep():
-                return d_a, conv_a, k_a, lu0, c_lu0
-
-            d, conv, k, lu, c_lu = lax.cond(conv_a, keep, refresh)
-            return with_aux(d, (conv, k, lu, c_lu, ~conv_a & ~stale_c))
+            first = jnp.where(skip | stale_c, 1, 0)
+            start = (first, d0, jnp.array(False), jnp.array(0, jnp.int32))
+            start += (lu0, c_lu0, jnp.array(False))
+            _, d, conv, k, lu, c_lu, stored_ok = lax.while_loop(again, attempt, start)
+            return with_aux(d, (conv, k, lu, c_lu, ~stored_ok & ~stale_c))
 
         def tangent_solve(g, b):
             # g(v) = (c J - I) v at the solution; exact solve (derivative passes only).
