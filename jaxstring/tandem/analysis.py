@@ -400,13 +400,13 @@ def find_equilibria(
 ):
     """All taut-hawser equilibria of a tandem scene (spec S1).
 
-    Solves from the `n_grid` x `n_grid` starts of `grid_starts`, under vmap; keeps
+    Solves from the `n_grid` x `n_grid` starts of `grid_starts`, all at once; keeps
     converged solutions (max |residual| < 1e-6) with T_h > `taut_tension` N,
     de-duplicates them (1 m, 0.01 rad) and classifies each by the eigenvalues of
     its `jacfwd` Jacobian. Returns a list of `Equilibrium`, sorted by FPSO heading.
 
-    `method`: `'newton'` (optimistix Newton, the default: it finds the most
-    roots), `'dogleg'` (Powell dogleg trust region, the optimistix analogue of
+    `method`: `'newton'` (optimistix Newton's iteration, the default: it finds
+    the most roots), `'dogleg'` (Powell dogleg trust region, the optimistix analogue of
     MINPACK hybrd) or `'lm'` (Levenberg-Marquardt; slow to converge here, finds
     the fewest). The counts of the non-admissible (overlapping-hull) roots depend
     on the method; no method reproduces every cell of the spec's table (see

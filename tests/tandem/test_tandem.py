@@ -259,6 +259,30 @@ def test_S1_weathervane_example_and_mirror_symmetry():
         assert d[j] < 1e-3 and mirror[j].kind == e.kind
 
 
+def test_S1_scenes_in_one_call_are_each_scenes_equilibria():
+    # find_equilibria_map (the scenes vmapped, the stability Jacobian taken once
+    # after the Newton loop) against find_equilibria of each scene (the Jacobian
+    # from the loop's last pass), and both Jacobians against the vector field's
+    # own at the roots (`stability`).
+    from jaxstring.tandem.analysis import find_equilibria_map
+
+    cells = [(15.0, 90.0), (20.0, 120.0)]
+    both = find_equilibria_map(
+        [tandem_equilibria(V_w=v, Delta_w_deg=d) for v, d in cells]
+    )
+    for cell, eqs in zip(cells, both):
+        one = equilibria(*cell)
+        assert [e.kind for e in eqs] == [e.kind for e in one]
+        sc = tandem_equilibria(V_w=cell[0], Delta_w_deg=cell[1])
+        for a, b in zip(eqs, one):
+            np.testing.assert_allclose(a.y, b.y, rtol=0, atol=1e-9)
+            eigs, kind = stability(sc, b.y)
+            assert kind == b.kind
+            scale = np.max(np.abs(eigs))
+            for got in (a.eigenvalues, b.eigenvalues):
+                assert np.max(np.abs(got - eigs)) < 1e-9 * scale
+
+
 def _mirror(y):
     # Reflect east and the angles: the image of a state under y -> -y.
     return y.reshape(2, 6) * np.array([1, -1, -1, 1, -1, -1])
