@@ -357,7 +357,7 @@ _equilibria_map = cpu_jit(_equilibria_map_body)
 def _equilibria_one_body(scene, n_grid, rtol, atol, max_steps, method):
     """`_equilibria_batch` from the `grid_starts` of one scene: the program of
     `find_equilibria`, without the scenes' `vmap` (batching the solves for a batch
-    of one traced them 0.8 s longer)."""
+    of one only lengthens their trace: docs/performance.md)."""
     q0s = grid_starts(scene, n_grid)
     return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
 
