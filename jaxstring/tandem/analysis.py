@@ -133,7 +133,7 @@ def _newton_batch(scene, q0s, rtol, atol, max_steps, jacobian=None):
     linearisation in the program, the smaller compilation (one scene). "after":
     the passes take the position columns only and one more linearisation takes
     it at the solutions: two in the program, the faster run (a batch of scenes;
-    performance.md, "The tandem's equilibria"). None: not needed.
+    docs/performance.md, "The README's examples"). None: not needed.
 
     Returns (solutions, converged mask, max |residual|, dF/dX at each solution
     or None)."""
