@@ -33,6 +33,10 @@ class SolverStructure:
       holding lines) and the other rows form a band of node width `bandwidth`
       (`second_order` then describes those rows): the Newton matrices are
       factorised by the band's Schur complement (`jaxstring._linalg`).
+    - `border_coupled`: with a `border`, the rows after it that the border's
+      rows depend on (e.g. the line nodes next to a body), or () (unknown): the
+      border's rows then come from the band's JVPs, coloured so that these rows'
+      blocks stay apart, instead of from transposed JVPs.
     - `dense`: the Jacobian has no narrow band (every node couples to every other,
       e.g. through tensions solved over the whole chain): the solvers take the
       dense path without probing.
@@ -49,6 +53,7 @@ class SolverStructure:
     step_jacobians: bool = False
     jacobian: bool = False
     border: int = 0
+    border_coupled: tuple[int, ...] = ()
     dense: bool = False
     sequential_elimination: bool = False
 

@@ -213,6 +213,7 @@ class BorderedWidth:
 
     width: int
     border: int
+    coupled: tuple = ()
 
 
 def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
@@ -232,7 +233,8 @@ def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
         return None
     border = 0 if scene is None else int(scene.structure.border)
     if border:
-        return BorderedWidth(int(scene.structure.bandwidth), border)
+        coupled = tuple(int(r) - border for r in scene.structure.border_coupled)
+        return BorderedWidth(int(scene.structure.bandwidth), border, coupled)
     width = declared_width(fn, y, args)
     if width is None:
         width = detect_width(fn, y, args)
@@ -348,28 +350,42 @@ def block_tridiagonal_jacobian(
     (`declared_sequential`).
     """
     n, b = y.shape
-    B = width * b
-    N = math.ceil(n / width)
     if linear_fn is None:
         _, linear_fn = jax.linearize(fn, y)
-    # Colour (r, c): every super-block I = r (mod 3), component c.
-    blk = np.arange(N) % 3
-    seeds = np.zeros((3, B, N, B))
-    for r in range(3):
+    seeds = jnp.asarray(_band_seeds(n, b, width, 3), dtype=y.dtype)
+    out = jax.vmap(linear_fn)(seeds)  # (3B, n, b)
+    return _band_from_jvps(out, n, b, width, 3, second_order, sequential)
+
+
+def _band_seeds(n, b, width, colours):
+    """The coloured unit directions `(colours B, n, b)`: colour (r, c) is component
+    c of every super-block I = r (mod colours); colours >= 3 keeps neighbouring
+    super-blocks apart."""
+    B = width * b
+    N = math.ceil(n / width)
+    blk = np.arange(N) % colours
+    seeds = np.zeros((colours, B, N, B))
+    for r in range(colours):
         for c in range(B):
             seeds[r, c, blk == r, c] = 1.0
-    seeds = seeds.reshape(3 * B, N * B)[:, : n * b].reshape(3 * B, n, b)
-    seeds = jnp.asarray(seeds, dtype=y.dtype)
-    out = jax.vmap(linear_fn)(seeds)  # (3B, n, b)
-    out = out.reshape(3 * B, n * b)
-    out = jnp.pad(out, ((0, 0), (0, N * B - n * b))).reshape(3, B, N, B)
-    # out[r, c, I, i] = sum over blocks J = r (mod 3), |I - J| <= 1 of J[I i, J c].
+    return seeds.reshape(colours * B, N * B)[:, : n * b].reshape(colours * B, n, b)
+
+
+def _band_from_jvps(out, n, b, width, colours, second_order, sequential):
+    """The `BlockTridiagonal` from the JVPs `out` `(colours B, n, b)` of the
+    `_band_seeds`."""
+    B = width * b
+    N = math.ceil(n / width)
+    out = out.reshape(colours * B, n * b)
+    out = jnp.pad(out, ((0, 0), (0, N * B - n * b))).reshape(colours, B, N, B)
+    # out[r, c, I, i] = sum over blocks J = r (mod colours), |I - J| <= 1 of
+    # J[I i, J c].
     idx = np.arange(N)
     # (N, B_row, B_col) for each neighbour offset
     take = lambda r: jnp.transpose(out[r, :, idx, :], (0, 2, 1))  # (N, i, c)
-    diag = take(idx % 3)
-    lower = take((idx - 1) % 3)
-    upper = take((idx + 1) % 3)
+    diag = take(idx % colours)
+    lower = take((idx - 1) % colours)
+    upper = take((idx + 1) % colours)
     first = np.zeros((N, 1, 1), bool)
     first[0] = True
     last = np.zeros((N, 1, 1), bool)
@@ -915,28 +931,77 @@ def bordered_jacobian(
     fn, y, spec: BorderedWidth, linear_fn=None, second_order=0, sequential=False
 ):
     """The Jacobian of `fn` at `y` (node-major `(n, b)`) as a `BorderedJacobian`:
-    the band of the rows after the border from 3 B JVPs (`block_tridiagonal_jacobian`
-    with the border held), the border's columns from `k b` JVPs and its rows from
-    `k b` transposed JVPs."""
+    the band of the rows after the border from coloured JVPs
+    (`block_tridiagonal_jacobian` with the border held), the border's columns from
+    `k b` JVPs, and its rows either from the band's JVPs or from `k b` transposed
+    JVPs.
+
+    The band's JVPs give the border's rows where the model names the rows the
+    border depends on (`spec.coupled`, `SolverStructure.border_coupled`) and the
+    colouring keeps their super-blocks in different colours (super-blocks
+    I = r mod c share a JVP; c >= 3 the smallest that does, (c - 3) B JVPs more
+    than the band alone). That is used where it costs fewer JVPs than the
+    transposes, each about one and a half JVPs."""
     k = spec.border
     n, b = y.shape
+    m = n - k
     if linear_fn is None:
         _, linear_fn = jax.linearize(fn, y)
-    zb = jnp.zeros((k, b), y.dtype)
-    lin_band = lambda v: linear_fn(jnp.concatenate([zb, v]))[k:]
-    band = block_tridiagonal_jacobian(
-        None, y[k:], spec.width, lin_band, second_order, sequential
-    )
     kb = k * b
-    seeds = (
-        jnp.zeros((kb, n, b), y.dtype)
-        .at[:, :k]
-        .set(jnp.eye(kb, dtype=y.dtype).reshape(kb, k, b))
+    B = spec.width * b
+    N = math.ceil(m / spec.width)
+    blocks = sorted({r // spec.width for r in spec.coupled})
+    colours = _colours_apart(blocks, N)
+    if colours is not None and 2 * (colours - 3) * B > 3 * kb:
+        colours = None
+    # the border's columns: unit directions in its rows
+    border_seeds = np.zeros((kb, n, b))
+    border_seeds[:, :k] = np.eye(kb).reshape(kb, k, b)
+    if colours is None:
+        band = block_tridiagonal_jacobian(
+            None,
+            y[k:],
+            spec.width,
+            lambda v: linear_fn(jnp.concatenate([jnp.zeros((k, b), y.dtype), v]))[k:],
+            second_order,
+            sequential,
+        )
+        cols = jax.vmap(linear_fn)(jnp.asarray(border_seeds, y.dtype))
+        cols = cols.reshape(kb, n * b)  # cols[c] = J e_c
+        transpose = jax.linear_transpose(linear_fn, y)
+        rows = jax.vmap(lambda s: transpose(s)[0])(jnp.asarray(border_seeds, y.dtype))
+        rows = rows.reshape(kb, n * b)[:, kb:]
+        return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
+    # the band's coloured directions and the border's columns in one batch
+    band_seeds = np.zeros((colours * B, n, b))
+    band_seeds[:, k:] = _band_seeds(m, b, spec.width, colours)
+    seeds = jnp.asarray(np.concatenate([band_seeds, border_seeds]), y.dtype)
+    out = jax.vmap(linear_fn)(seeds)
+    nb = colours * B
+    band = _band_from_jvps(
+        out[:nb, k:], m, b, spec.width, colours, second_order, sequential
     )
-    cols = jax.vmap(linear_fn)(seeds).reshape(kb, n * b)  # cols[c] = J e_c
-    transpose = jax.linear_transpose(linear_fn, y)
-    rows = jax.vmap(lambda s: transpose(s)[0])(seeds).reshape(kb, n * b)
-    return BorderedJacobian(cols[:, :kb].T, rows[:, kb:], cols[:, kb:].T, band, k)
+    cols = out[nb:].reshape(kb, n * b)  # cols[c] = J e_c
+    # out[r B + c, :k]: the border's rows of J e_c over the super-blocks of
+    # colour r, that is of the one coupled super-block there (the others add
+    # zeros)
+    head = out[:nb, :k].reshape(colours, B, kb)
+    idx = np.asarray(blocks, np.int32)
+    R = jnp.zeros((N, kb, B), y.dtype)
+    R = R.at[idx].set(jnp.transpose(head[idx % colours], (0, 2, 1)))
+    rows = jnp.transpose(R, (1, 0, 2)).reshape(kb, N * B)[:, : m * b]
+    return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
+
+
+def _colours_apart(blocks, N):
+    """The smallest colour count c >= 3 with the super-blocks `blocks` in
+    different colours (I mod c), or None (no coupled rows named)."""
+    if not blocks:
+        return None
+    for c in range(3, max(N, 3) + 1):
+        if len({J % c for J in blocks}) == len(blocks):
+            return c
+    return None
 
 
 class BorderedFactor(eqx.Module):

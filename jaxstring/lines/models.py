@@ -245,6 +245,9 @@ class _Topology(eqx.Module):
     bending: _Bending
     frames: _Frames
     group_rows: tuple  # per group: its state rows
+    width: int  # node bandwidth of the rows after the border
+    border: int  # leading rows (the rigid groups') coupled to every row, or 0
+    border_coupled: tuple  # the rows after the border that the border's rows read
 
     @property
     def n_tri(self) -> int:
@@ -320,7 +323,50 @@ def _cuthill_mckee(vertices, adj):
     return out
 
 
-def _topology(points, attach, segments, rods, bodies) -> _Topology:
+def _band_width(rows_of, attach, segments, obj, bending, border=0):
+    """The node bandwidth of the state rows after the first `border`: rows that
+    one segment joins (two segments, the bending joints, with `bending`), and the
+    rows of one rigid group."""
+    rows = lambda v: [r for r in _vertex_rows(rows_of, v) if r >= border]
+    width = 1
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        chain = [obj(a)] + [("n", k, i) for i in range(1, N)] + [obj(b)]
+        for reach in (2, 3) if bending else (2,):
+            for i in range(len(chain) - reach + 1):
+                rr = [r for v in chain[i : i + reach] for r in rows(v)]
+                if rr:
+                    width = max(width, max(rr) - min(rr))
+    for v in rows_of:
+        rr = rows(v)
+        if rr:
+            width = max(width, max(rr) - min(rr))
+    return width
+
+
+def _border_coupled(rows_of, attach, segments, obj, bending, border):
+    """The rows after the first `border` (the rigid groups') that the border's
+    rows depend on: those one segment (two, with `bending`) away from a rigid
+    group along a line."""
+    reach = 3 if bending else 2
+    out = set()
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        chain = [obj(a)] + [("n", k, i) for i in range(1, N)] + [obj(b)]
+        for i in range(len(chain)):
+            window = chain[max(0, i - reach + 1) : i + reach]
+            if any(v is not None and v[0] == "g" for v in window):
+                out.update(r for r in _vertex_rows(rows_of, chain[i]) if r >= border)
+    return tuple(sorted(out))
+
+
+def _vertex_rows(rows_of, v):
+    if v is None:
+        return []
+    if v[0] in ("p", "n"):
+        return rows_of[v]
+    return [x for kind, _, r0 in rows_of[v] for x in range(r0, r0 + (kind == "r") + 1)]
+
+
+def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
     free = tuple(i for i, p in enumerate(points) if isinstance(p, FreePoint))
     held = tuple(i for i, p in enumerate(points) if isinstance(p, AbstractEnd))
     on_body = tuple(i for i, p in enumerate(points) if isinstance(p, BodyPoint))
@@ -378,23 +424,43 @@ def _topology(points, attach, segments, rods, bodies) -> _Topology:
         vertex(("p", i))
     for g in range(len(groups)):
         vertex(("g", g))
-    order = _cuthill_mckee(vertices, adj)
-    rows_of = {}
-    n = 0
-    for o in order:
-        if o[0] in ("p", "n"):
-            rows_of[o] = [n]
-            n += 1
-        else:
-            rr = []
-            for f in groups[o[1]]:
-                if trans[f] == "state":
-                    rr.append(("t", f, n))
-                    n += 1
-                if rot[f] == "state":
-                    rr.append(("r", f, n))
-                    n += 2
-            rows_of[o] = rr
+
+    def assign(order):
+        rows_of, n = {}, 0
+        for o in order:
+            if o[0] in ("p", "n"):
+                rows_of[o] = [n]
+                n += 1
+            else:
+                rr = []
+                for f in groups[o[1]]:
+                    if trans[f] == "state":
+                        rr.append(("t", f, n))
+                        n += 1
+                    if rot[f] == "state":
+                        rr.append(("r", f, n))
+                        n += 2
+                rows_of[o] = rr
+        return rows_of, n
+
+    # Two orderings: everything in one band, or the rigid groups' rows first as
+    # the Jacobian's border and the lines' nodes in a band of their own (the
+    # lines on a body then no longer interleave around it). The border costs
+    # 2 x 6 JVPs per row (its columns and its rows), the band 3 x 6 per node of
+    # width: the cheaper Jacobian wins.
+    rows_of, n = assign(_cuthill_mckee(vertices, adj))
+    width, border = _band_width(rows_of, attach, segments, obj, bending_on), 0
+    if groups:
+        rest = [v for v in vertices if v[0] != "g"]
+        adj_rest = {v: [u for u in adj[v] if u[0] != "g"] for v in rest}
+        order = [("g", g) for g in range(len(groups))]
+        b_rows, b_n = assign(order + _cuthill_mckee(rest, adj_rest))
+        k = sum(len(_vertex_rows(b_rows, g)) for g in order)
+        b_width = _band_width(b_rows, attach, segments, obj, bending_on, k)
+        if 2 * k <= 3 * (width - b_width):
+            rows_of, n, width, border = b_rows, b_n, b_width, k
+    coupled = _border_coupled(rows_of, attach, segments, obj, bending_on, border)
+    coupled = coupled if border else ()
     line_rows = [[rows_of[("n", k, i)][0] for i in range(1, N)]
                  for k, N in enumerate(segments)]  # fmt: skip
     n_state = n
@@ -486,12 +552,8 @@ def _topology(points, attach, segments, rods, bodies) -> _Topology:
         rod_frame=tuple(rod_frame),
     )
     # the state rows of each group (a rigid slot stands for all of them)
-    group_rows = []
-    for g in range(len(groups)):
-        rr = rows_of.get(("g", g), [])
-        group_rows.append(
-            tuple(x for kind, _, r0 in rr for x in range(r0, r0 + (kind == "r") + 1))
-        )
+    group_rows = [tuple(_vertex_rows(rows_of, ("g", g))) if ("g", g) in rows_of
+                  else () for g in range(len(groups))]  # fmt: skip
     return _Topology(
         n_state=n_state,
         tri_rows=arr(tri_rows),
@@ -513,6 +575,9 @@ def _topology(points, attach, segments, rods, bodies) -> _Topology:
         bending=bending,
         frames=frames,
         group_rows=tuple(group_rows),
+        width=width,
+        border=border,
+        border_coupled=coupled,
     )
 
 
@@ -710,7 +775,7 @@ class LineNetwork(AbstractModel):
     @property
     def topology(self) -> _Topology:
         return _topology(self.points, self.attach, self.segments, self.rods,
-                         self.bodies)  # fmt: skip
+                         self.bodies, self.EI is not None)  # fmt: skip
 
     def state_shape(self):
         return (self.topology.n_state, 6)
@@ -720,8 +785,10 @@ class LineNetwork(AbstractModel):
 
     def structure(self, effects):
         """The node band of the state's ordering (lines, free points and rigid
-        objects placed next to the lines that reach them), the (r, r') layout
-        (where nothing rotates), and a Jacobian per implicit stage (the stiff
+        objects placed next to the lines that reach them, or the rigid objects'
+        rows first as the Jacobian's border where that needs fewer JVPs: see
+        `_topology`), the (r, r') layout of the rows in the band (where no
+        rotating row is in it), and a Jacobian per implicit stage (the stiff
         axial forces turn with the lines); BDF keeps its Jacobian across steps
         (mooring chains move slowly). Bending couples each node to the nodes two
         away along its line; a rigid object's rows couple to one another and to
@@ -730,37 +797,13 @@ class LineNetwork(AbstractModel):
         measured)."""
         del effects
         top = self.topology
-        n_tri, start = top.n_tri, top.rigid_start
-        frames = top.frames
-        group_of = {f: g for g, fs in enumerate(frames.groups) for f in fs
-                    if frames.has_dof(f)}  # fmt: skip
-
-        def rows(slot):
-            if slot < n_tri:
-                return (int(top.tri_rows[slot]),)
-            if slot < start:
-                return ()
-            g = group_of.get(int(top.slot_frame[slot - start]))
-            return () if g is None else top.group_rows[g]
-
-        groups = [[top.body[top.seg_lo], top.body[top.seg_lo + 1]]]
-        if self.EI is not None:
-            m = top.bending.inner_node
-            groups.append([top.body[m - 1], top.body[m], top.body[m + 1]])
-        width = 1
-        for group in groups:
-            for j in range(len(group[0])):
-                rr = [r for col in group for r in rows(int(col[j]))]
-                if rr:
-                    width = max(width, max(rr) - min(rr))
-        for rr in top.group_rows:
-            if rr:
-                width = max(width, max(rr) - min(rr))
-        second_order = 0 if frames.groups else 3
+        rotating_in_band = bool(top.frames.groups) and not top.border
         return SolverStructure(
-            bandwidth=width,
-            second_order=second_order,
+            bandwidth=top.width,
+            second_order=0 if rotating_in_band else 3,
             stage_jacobians=True,
+            border=top.border,
+            border_coupled=top.border_coupled,
             sequential_elimination=True,
         )
 

@@ -355,8 +355,18 @@ def test_model_jacobian_factor_equals_dense_solve(a, b):
     assert np.max(np.abs(x - dense)) / np.max(np.abs(dense)) < 1e-8
 
 
-@pytest.mark.parametrize("second_order", [0, 3])
-def test_bordered_jacobian_and_solve_equal_dense(second_order):
+@pytest.mark.parametrize(
+    "second_order, hooks, coupled",
+    [
+        (0, (0, 5), ()),
+        (3, (0, 5), ()),
+        # the border's rows from the band's JVPs: 3 colours keep nodes 0 and 5
+        # apart, nodes 0, 3 and 6 need 4
+        (3, (0, 5), (0, 5)),
+        (0, (0, 3, 6), (0, 3, 6)),
+    ],
+)
+def test_bordered_jacobian_and_solve_equal_dense(second_order, hooks, coupled):
     # A vessel row (the border) coupled to two chains of springs at scattered rows,
     # the chains' rows (q, v) banded with width 1: the bordered Jacobian equals
     # jacfwd and its Schur-complement solve equals the dense solve.
@@ -364,7 +374,7 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order):
     n, k = 9, 1
     K = jnp.asarray(rng.uniform(1.0, 3.0, n - k))
     hook = np.zeros(n - k)
-    hook[[0, 5]] = 1.0  # the border pulls these nodes
+    hook[list(hooks)] = 1.0  # the border pulls these nodes
     hook = jnp.asarray(hook)
 
     def fn(y):
@@ -377,7 +387,7 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order):
         return jnp.concatenate([db[None], jnp.concatenate([v, dv], axis=1)])
 
     y = jnp.asarray(rng.standard_normal((n, 6)))
-    spec = _linalg.BorderedWidth(width=1, border=k)
+    spec = _linalg.BorderedWidth(width=1, border=k, coupled=coupled)
     # compiled, as the solvers run them (op by op, each operation compiles apart)
     mat = jax.jit(lambda u: _linalg.jacobian(fn, u, spec, second_order=second_order))(y)
     assert isinstance(mat, _linalg.BorderedJacobian)
@@ -392,3 +402,50 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order):
         x = np.asarray(solve(mat, a, b, jnp.asarray(rhs))).reshape(-1)
         dense = np.linalg.solve(a * np.eye(y.size) + b * J, rhs.reshape(-1))
         np.testing.assert_allclose(x, dense, rtol=1e-11, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "deck",
+    ["RodHanging.txt", pytest.param("BodiesAndRods.dat", marks=pytest.mark.slow)],
+)
+def test_network_with_rigid_rows_orders_them_as_the_border(deck):
+    # A rod hung by two ropes, a body with three lines (and a pinned rod): the
+    # rigid objects' rows come first as the Jacobian's border, the lines' nodes
+    # form a band of width 1 behind it, and the Jacobian built from that
+    # structure (the border's rows from the band's coloured JVPs, through the
+    # rows the model names as coupled) is the vector field's: J v equals its JVP
+    # for random v, and its Newton solve x of (I - h J) x = r gives back r.
+    from jaxstring import lines
+
+    scene = lines.read_moordyn(lines.case_path(deck), static=False)
+    st = scene.structure
+    assert st.border > 0 and st.bandwidth == 1 and st.second_order == 3
+    y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
+    vs = jax.random.normal(jax.random.PRNGKey(1), (3,) + y.shape)
+    spec = _linalg.choose_structure(lambda u, s: s.vector_field(0.3, u), y, scene)
+    assert spec.coupled
+    k, h = st.border, 1e-3
+
+    def check(u, s, vs):
+        fn = lambda v: s.vector_field(0.3, v)
+        mat = _linalg.jacobian(fn, u, spec, None, 3, True)
+        assert isinstance(mat, _linalg.BorderedJacobian)
+
+        def matvec(v):
+            vb, vl = v[:k].reshape(-1), v[k:]
+            top = mat.A @ vb + mat.R @ vl.reshape(-1)
+            low = (mat.C @ vb).reshape(vl.shape) + mat.band.matvec(vl)
+            return jnp.concatenate([top.reshape(k, -1), low])
+
+        jvps = jax.vmap(lambda v: jax.jvp(fn, (u,), (v,))[1])(vs)
+        fac = _linalg.factor(mat.scale_shift(1.0, -h))
+        back = jax.vmap(lambda r: (lambda x: x - h * matvec(x))(fac.solve(r)))(vs)
+        return jax.vmap(matvec)(vs), jvps, back
+
+    from jaxstring._jit import cpu_jit
+
+    # compiled as the solvers compile it (XLA:CPU's options for solves)
+    Jv, jvps, back = cpu_jit(check)(y, scene, vs)
+    scale = np.max(np.abs(np.asarray(jvps)))
+    assert np.max(np.abs(np.asarray(Jv - jvps))) <= 1e-12 * scale
+    np.testing.assert_allclose(np.asarray(back), np.asarray(vs), rtol=0, atol=1e-10)
