@@ -37,6 +37,9 @@ class SolverStructure:
       rows depend on (e.g. the line nodes next to a body), or () (unknown): the
       border's rows then come from the band's JVPs, coloured so that these rows'
       blocks stay apart, instead of from transposed JVPs.
+    - `border_columns`: with a `border`, the entries of its rows (flat indices
+      into its `border * b` entries) that the vector field reads and changes, or
+      () (all): the others (e.g. unused components of a row) take no JVP.
     - `dense`: the Jacobian has no narrow band (every node couples to every other,
       e.g. through tensions solved over the whole chain): the solvers take the
       dense path without probing.
@@ -54,6 +57,7 @@ class SolverStructure:
     jacobian: bool = False
     border: int = 0
     border_coupled: tuple[int, ...] = ()
+    border_columns: tuple[int, ...] = ()
     dense: bool = False
     sequential_elimination: bool = False
 

@@ -214,6 +214,7 @@ class BorderedWidth:
     width: int
     border: int
     coupled: tuple = ()
+    columns: tuple = ()
 
 
 def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
@@ -233,8 +234,10 @@ def choose_structure(fn, y, args=None, linear_solver: str = "auto"):
         return None
     border = 0 if scene is None else int(scene.structure.border)
     if border:
-        coupled = tuple(int(r) - border for r in scene.structure.border_coupled)
-        return BorderedWidth(int(scene.structure.bandwidth), border, coupled)
+        st = scene.structure
+        coupled = tuple(int(r) - border for r in st.border_coupled)
+        columns = tuple(int(c) for c in st.border_columns)
+        return BorderedWidth(int(st.bandwidth), border, coupled, columns)
     width = declared_width(fn, y, args)
     if width is None:
         width = detect_width(fn, y, args)
@@ -954,9 +957,18 @@ def bordered_jacobian(
     colours = _colours_apart(blocks, N)
     if colours is not None and 2 * (colours - 3) * B > 3 * kb:
         colours = None
-    # the border's columns: unit directions in its rows
-    border_seeds = np.zeros((kb, n, b))
-    border_seeds[:, :k] = np.eye(kb).reshape(kb, k, b)
+    # the border's columns: unit directions in its rows (those of `spec.columns`;
+    # the others are zero)
+    live = np.asarray(spec.columns or range(kb), np.int32)
+    border_seeds = np.zeros((live.size, n, b))
+    border_seeds[:, :k] = np.eye(kb)[live].reshape(live.size, k, b)
+
+    def unit_columns(out):  # J e_c for every c of the border, (kb, n b)
+        out = out.reshape(live.size, n * b)
+        if live.size == kb:
+            return out
+        return jnp.zeros((kb, n * b), out.dtype).at[live].set(out)
+
     if colours is None:
         band = block_tridiagonal_jacobian(
             None,
@@ -966,11 +978,10 @@ def bordered_jacobian(
             second_order,
             sequential,
         )
-        cols = jax.vmap(linear_fn)(jnp.asarray(border_seeds, y.dtype))
-        cols = cols.reshape(kb, n * b)  # cols[c] = J e_c
+        cols = unit_columns(jax.vmap(linear_fn)(jnp.asarray(border_seeds, y.dtype)))
         transpose = jax.linear_transpose(linear_fn, y)
         rows = jax.vmap(lambda s: transpose(s)[0])(jnp.asarray(border_seeds, y.dtype))
-        rows = rows.reshape(kb, n * b)[:, kb:]
+        rows = unit_columns(rows)[:, kb:]
         return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
     # the band's coloured directions and the border's columns in one batch
     band_seeds = np.zeros((colours * B, n, b))
@@ -981,7 +992,7 @@ def bordered_jacobian(
     band = _band_from_jvps(
         out[:nb, k:], m, b, spec.width, colours, second_order, sequential
     )
-    cols = out[nb:].reshape(kb, n * b)  # cols[c] = J e_c
+    cols = unit_columns(out[nb:])  # cols[c] = J e_c
     # out[r B + c, :k]: the border's rows of J e_c over the super-blocks of
     # colour r, that is of the one coupled super-block there (the others add
     # zeros)

@@ -248,6 +248,7 @@ class _Topology(eqx.Module):
     width: int  # node bandwidth of the rows after the border
     border: int  # leading rows (the rigid groups') coupled to every row, or 0
     border_coupled: tuple  # the rows after the border that the border's rows read
+    border_columns: tuple  # the border's entries in use (flat, row-major)
 
     @property
     def n_tri(self) -> int:
@@ -461,6 +462,14 @@ def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
             rows_of, n, width, border = b_rows, b_n, b_width, k
     coupled = _border_coupled(rows_of, attach, segments, obj, bending_on, border)
     coupled = coupled if border else ()
+    # the border's entries in use: a rotation's second row holds only the
+    # quaternion's scalar part
+    columns = []
+    for g in range(len(groups) if border else 0):
+        for kind, _, r0 in rows_of[("g", g)]:
+            columns += range(6 * r0, 6 * r0 + 6)
+            if kind == "r":
+                columns.append(6 * (r0 + 1))
     line_rows = [[rows_of[("n", k, i)][0] for i in range(1, N)]
                  for k, N in enumerate(segments)]  # fmt: skip
     n_state = n
@@ -578,6 +587,7 @@ def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
         width=width,
         border=border,
         border_coupled=coupled,
+        border_columns=tuple(sorted(columns)),
     )
 
 
@@ -804,6 +814,7 @@ class LineNetwork(AbstractModel):
             stage_jacobians=True,
             border=top.border,
             border_coupled=top.border_coupled,
+            border_columns=top.border_columns,
             sequential_elimination=True,
         )
 
