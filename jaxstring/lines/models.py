@@ -25,7 +25,10 @@ State: node-major `(n, 6)`, row = (position, velocity) of one free body: the int
 nodes of each line in order and each free point next to the first line that reaches
 it, so that the Jacobian is block-banded with the bandwidth its `structure` declares
 (1 for a chain of lines and points), and the implicit solvers' Newton steps cost
-O(nodes).
+O(nodes). Rigid objects with degrees of freedom (bodies, rods) have rows of their own
+(translation, and rotation as a quaternion and the angular velocity); where the
+lines meet on them they come first, as the Jacobian's border, and the lines' nodes
+form a band behind them (`_topology`).
 """
 
 import math
