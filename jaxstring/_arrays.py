@@ -86,7 +86,8 @@ def host_map(op, tree):
 # strided rows; a line's parameter repeated over its segments) reads and writes
 # the same rows as strided slices, (interior) pads and concatenations, which fuse.
 MAX_RUNS = 4
-"""Index arrays of more runs than this stay a gather (a scatter). Every fusion
+"""Index arrays of more runs than this stay a gather (for sums, `add_rows`, a
+gather of the inverse index). Every fusion
 that reads a concatenation of K runs holds the K-way choice: measured on MoorDyn's
 decks (docs/lines.md, "Index arrays as slices"), up to 4 runs (a line's nodes
 between its end points, a few lines) compiled and ran faster than the gathers,
@@ -136,8 +137,10 @@ def add_rows(size, idx, v):
     the result is `v` with a zero row appended, read at the inverse index (row
     j of the result from the `v` row sent there, else the zero row): slices
     where that inverse index is a few runs (`take_rows`). Repeated values: the
-    first occurrences so, plus the rest (fewer) likewise. A scatter where an
-    inverse index has more runs than `MAX_RUNS`."""
+    first occurrences so, plus the rest (fewer) likewise. A gather where an
+    inverse index has more runs than `MAX_RUNS`, never a scatter: XLA:CPU runs a
+    scatter as a loop over its rows, one dynamic update per row, a gather as one
+    fused kernel."""
     idx = np.asarray(idx, dtype=np.int64)
     n = idx.shape[0]
     if n == 0:
@@ -150,7 +153,5 @@ def add_rows(size, idx, v):
         )
     inv = np.full(size, n)
     inv[idx] = np.arange(n)
-    if len(_runs(inv)) > MAX_RUNS:
-        return jnp.zeros((size,) + v.shape[1:], v.dtype).at[idx].add(v)
     zero = jnp.zeros((1,) + v.shape[1:], v.dtype)
     return take_rows(jnp.concatenate([v, zero], axis=0), inv)

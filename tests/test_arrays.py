@@ -1,6 +1,6 @@
 """Static index arrays as slices (`_arrays.take_rows`, `add_rows`): equal to the
-gather and the scatter they replace for every pattern of rows, and the line
-networks' vector field free of gathers and scatters."""
+gather and the scatter they replace for every pattern of rows, a single line's
+vector field free of gathers and scatters, and a network's free of scatters."""
 
 import jax
 import jax.numpy as jnp
@@ -58,3 +58,16 @@ def test_a_single_lines_vector_field_has_no_gather_or_scatter():
         jaxpr = jax.make_jaxpr(lambda y: scene.vector_field(0.0, y))(scene.y0)
         found = _primitives(jaxpr.jaxpr, set())
         assert not found & {"gather", "scatter", "scatter-add", "scatter_add"}, deck
+
+
+def test_a_networks_vector_field_sums_rows_without_a_scatter():
+    """MoorDyn's tripod (11 lines) and BodiesAndRods (6 lines and a body): index
+    arrays of more runs than `MAX_RUNS` are gathers, and the sums into rows
+    gathers of the inverse index, never scatters (XLA:CPU's loops of one dynamic
+    update per row)."""
+    for deck in ("tripod.txt", "BodiesAndRods.dat"):
+        scene = lines.read_moordyn(lines.case_path(deck), static=False)
+        jaxpr = jax.make_jaxpr(lambda y: scene.vector_field(0.0, y))(scene.y0)
+        found = _primitives(jaxpr.jaxpr, set())
+        assert "gather" in found, deck
+        assert not found & {"scatter", "scatter-add", "scatter_add"}, deck
