@@ -449,9 +449,10 @@ def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
 
     # Two orderings: everything in one band, or the rigid groups' rows first as
     # the Jacobian's border and the lines' nodes in a band of their own (the
-    # lines on a body then no longer interleave around it). The border costs
-    # 2 x 6 JVPs per row (its columns and its rows), the band 3 x 6 per node of
-    # width: the cheaper Jacobian wins.
+    # lines on a body then no longer interleave around it). A border row costs
+    # at most 2 x 6 JVPs (its columns, and its rows where the band's JVPs cannot
+    # give them: `bordered_jacobian`), a node of band width 3 x 6: the ordering
+    # with the cheaper bound wins.
     rows_of, n = assign(_cuthill_mckee(vertices, adj))
     width, border = _band_width(rows_of, attach, segments, obj, bending_on), 0
     if groups:

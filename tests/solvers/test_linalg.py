@@ -405,21 +405,34 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order, hooks, coupled):
 
 
 @pytest.mark.parametrize(
-    "deck",
-    ["RodHanging.txt", pytest.param("BodiesAndRods.dat", marks=pytest.mark.slow)],
+    "deck, EI, width",
+    [
+        ("RodHanging.txt", None, 1),
+        pytest.param("BodiesAndRods.dat", None, 1, marks=pytest.mark.slow),
+        # bending: the ropes clamped to the rod's ends, nodes two apart coupled
+        pytest.param("RodHanging.txt", 1e5, 2, marks=pytest.mark.slow),
+    ],
 )
-def test_network_with_rigid_rows_orders_them_as_the_border(deck):
+def test_network_with_rigid_rows_orders_them_as_the_border(deck, EI, width):
     # A rod hung by two ropes, a body with three lines (and a pinned rod): the
     # rigid objects' rows come first as the Jacobian's border, the lines' nodes
-    # form a band of width 1 behind it, and the Jacobian built from that
-    # structure (the border's rows from the band's coloured JVPs, through the
-    # rows the model names as coupled) is the vector field's: J v equals its JVP
-    # for random v, and its Newton solve x of (I - h J) x = r gives back r.
+    # form a band behind it (width 1, 2 with bending), and the Jacobian built
+    # from that structure (the border's rows from the band's coloured JVPs,
+    # through the rows the model names as coupled) is the vector field's: J v
+    # equals its JVP for random v, and its Newton solve x of (I - h J) x = r
+    # gives back r.
+    import equinox as eqx
+
     from jaxstring import lines
 
     scene = lines.read_moordyn(lines.case_path(deck), static=False)
+    if EI is not None:
+        EIs = jnp.full(scene.model.n_lines, EI)
+        scene = eqx.tree_at(
+            lambda s: s.model.EI, scene, EIs, is_leaf=lambda x: x is None
+        )
     st = scene.structure
-    assert st.border > 0 and st.bandwidth == 1 and st.second_order == 3
+    assert st.border > 0 and st.bandwidth == width and st.second_order == 3
     y = scene.y0 + 0.01 * jax.random.normal(jax.random.PRNGKey(0), scene.y0.shape)
     vs = jax.random.normal(jax.random.PRNGKey(1), (3,) + y.shape)
     spec = _linalg.choose_structure(lambda u, s: s.vector_field(0.3, u), y, scene)
