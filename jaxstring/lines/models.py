@@ -333,8 +333,7 @@ def _band_width(rows_of, attach, segments, obj, bending, border=0):
     rows of one rigid group."""
     rows = lambda v: [r for r in _vertex_rows(rows_of, v) if r >= border]
     width = 1
-    for k, ((a, b), N) in enumerate(zip(attach, segments)):
-        chain = [obj(a)] + [("n", k, i) for i in range(1, N)] + [obj(b)]
+    for chain in _chains(attach, segments, obj):
         for reach in (2, 3) if bending else (2,):
             for i in range(len(chain) - reach + 1):
                 rr = [r for v in chain[i : i + reach] for r in rows(v)]
@@ -353,13 +352,19 @@ def _border_coupled(rows_of, attach, segments, obj, bending, border):
     group along a line."""
     reach = 3 if bending else 2
     out = set()
-    for k, ((a, b), N) in enumerate(zip(attach, segments)):
-        chain = [obj(a)] + [("n", k, i) for i in range(1, N)] + [obj(b)]
+    for chain in _chains(attach, segments, obj):
         for i in range(len(chain)):
             window = chain[max(0, i - reach + 1) : i + reach]
             if any(v is not None and v[0] == "g" for v in window):
                 out.update(r for r in _vertex_rows(rows_of, chain[i]) if r >= border)
     return tuple(sorted(out))
+
+
+def _chains(attach, segments, obj):
+    """Per line, the vertices of its nodes from end A to end B (`obj` of each
+    end: a free point, a rigid group or None; its interior nodes)."""
+    for k, ((a, b), N) in enumerate(zip(attach, segments)):
+        yield [obj(a)] + [("n", k, i) for i in range(1, N)] + [obj(b)]
 
 
 def _vertex_rows(rows_of, v):
@@ -416,10 +421,9 @@ def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
             vertices.append(v)
         return v
 
-    for k, ((a, b), N) in enumerate(zip(attach, segments)):
-        chain = [vertex(obj(a))]
-        chain += [vertex(("n", k, i)) for i in range(1, N)]
-        chain.append(vertex(obj(b)))
+    for chain in _chains(attach, segments, obj):
+        for v in chain:
+            vertex(v)
         for u, v in zip(chain[:-1], chain[1:]):
             if u is not None and v is not None and u != v:
                 adj[u].append(v)
