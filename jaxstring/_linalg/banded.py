@@ -57,6 +57,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array
 
+from .._arrays import add_rows
 from .._jit import cpu_compiler_options
 from .._scene import Scene, scene_vector_field
 
@@ -967,7 +968,7 @@ def bordered_jacobian(
         out = out.reshape(live.size, n * b)
         if live.size == kb:
             return out
-        return _rows_at(out, live, kb)
+        return add_rows(kb, live, out)
 
     if colours is None:
         band = block_tridiagonal_jacobian(
@@ -998,17 +999,9 @@ def bordered_jacobian(
     # zeros)
     head = out[:nb, :k].reshape(colours, B, kb)
     idx = np.asarray(blocks, np.int32)
-    R = _rows_at(jnp.transpose(head[idx % colours], (0, 2, 1)), idx, N)
+    R = add_rows(N, idx, jnp.transpose(head[idx % colours], (0, 2, 1)))
     rows = jnp.transpose(R, (1, 0, 2)).reshape(kb, N * B)[:, : m * b]
     return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
-
-
-def _rows_at(x, idx, size):
-    """`zeros((size,) + x.shape[1:]).at[idx].set(x)` for distinct static `idx`, as
-    a gather (XLA:CPU runs a scatter as a loop over its rows)."""
-    inv = np.full(size, len(idx), np.int32)
-    inv[np.asarray(idx)] = np.arange(len(idx))
-    return jnp.concatenate([x, jnp.zeros((1,) + x.shape[1:], x.dtype)])[inv]
 
 
 def _colours_apart(blocks, N):

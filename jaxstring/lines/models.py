@@ -468,16 +468,16 @@ def _topology(points, attach, segments, rods, bodies, bending_on) -> _Topology:
         b_width = _band_width(b_rows, attach, segments, obj, bending_on, k)
         if 2 * k <= 3 * (width - b_width):
             rows_of, n, width, border = b_rows, b_n, b_width, k
-    coupled = _border_coupled(rows_of, attach, segments, obj, bending_on, border)
-    coupled = coupled if border else ()
-    # the border's entries in use: a rotation's second row holds only the
-    # quaternion's scalar part
-    columns = []
-    for g in range(len(groups) if border else 0):
-        for kind, _, r0 in rows_of[("g", g)]:
-            columns += range(6 * r0, 6 * r0 + 6)
-            if kind == "r":
-                columns.append(6 * (r0 + 1))
+    coupled, columns = (), []
+    if border:
+        coupled = _border_coupled(rows_of, attach, segments, obj, bending_on, border)
+        # the border's entries in use: a rotation's second row holds only the
+        # quaternion's scalar part
+        for g in range(len(groups)):
+            for kind, _, r0 in rows_of[("g", g)]:
+                columns += range(6 * r0, 6 * r0 + 6)
+                if kind == "r":
+                    columns.append(6 * (r0 + 1))
     line_rows = [[rows_of[("n", k, i)][0] for i in range(1, N)]
                  for k, N in enumerate(segments)]  # fmt: skip
     n_state = n
