@@ -48,7 +48,7 @@ scene = js.string_pendulum(formulation, k=k, EA=1e6, t1=2.0)
 config = js.SolveConfig(solver=solver)
 ts = config.save_times(scene.t0, scene.t1)
 t0 = time.perf_counter()
-lowered = _integrate.jit_solve.lower_cpu(scene, config, ts)
+lowered = _integrate.jit_solve_values.lower_cpu(scene, config, ts)
 trace_s = time.perf_counter() - t0
 t0 = time.perf_counter()
 compiled = lowered.compile(_jit.cpu_compiler_options() | options)

@@ -43,7 +43,7 @@ scene = js.string_pendulum(formulation, k=k, EA=1e6, alpha=0.01, t1=2.0)
 config = js.SolveConfig(solver=solver, rtol=1e-6, atol=1e-6)
 ts = config.save_times(scene.t0, scene.t1)
 t0 = time.perf_counter()
-lowered = _integrate.jit_solve.lower_cpu(scene, config, ts)
+lowered = _integrate.jit_solve_values.lower_cpu(scene, config, ts)
 trace_s = time.perf_counter() - t0
 options = getattr(_jit, "cpu_compiler_options", lambda: _jit.CPU_COMPILER_OPTIONS)()
 t0 = time.perf_counter()

@@ -12,7 +12,9 @@ import dataclasses
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 
 from . import _programs
 from ._arrays import host_map, host_op
@@ -31,12 +33,13 @@ from ._trajectory import Trajectory
 from ._validate import check_times
 
 
-def solver_parts(scene: Scene, config: SolveConfig, norm=None):
+def solver_parts(scene: Scene, config: SolveConfig, norm=None, differentiable=True):
     """The diffrax solver (before any projection wrapper), step-size controller and
     initial step of `scene` under `config`, as every solve builds them. `norm`: the
-    controller's error norm (default: RMS)."""
+    controller's error norm (default: RMS). `differentiable`: False for a solve
+    that nothing differentiates (`solve`)."""
     nr, na = config.newton_tolerances()
-    solver = build_solver(config.solver, nr, na, scene)
+    solver = build_solver(config.solver, nr, na, scene, differentiable)
     kw = {} if norm is None else {"norm": norm}
     controller = make_controller(
         config.solver,
@@ -121,14 +124,19 @@ def _projected(solver, adjoint):
     return _ProjectedSolverAD(solver)
 
 
-def solve_scene(scene: Scene, config: SolveConfig, saveat, adjoint=None):
+def solve_scene(
+    scene: Scene, config: SolveConfig, saveat, adjoint=None, differentiable=True
+):
     """diffrax's solution of `scene` under `config`, saved as `saveat(fn)` says,
     `fn` the projection onto the constraint manifold for a projected solve (None:
     the state as is). E.g. every step: `saveat=lambda fn: dfx.SaveAt(steps=True)`.
-    `adjoint`: a diffrax adjoint (default: the configuration's for a gradient)."""
-    if adjoint is None:
+    `adjoint`: a diffrax adjoint (default: the configuration's for a gradient).
+    `differentiable`: False for a solve that nothing differentiates (`solve`)."""
+    if not differentiable:
+        adjoint = dfx.ForwardMode()  # plain while loops: nothing to checkpoint
+    elif adjoint is None:
         adjoint = config.adjoint_for("gradient")
-    solver, controller, dt0 = solver_parts(scene, config)
+    solver, controller, dt0 = solver_parts(scene, config, differentiable=differentiable)
     save_fn = None
     if config.project and scene.model.projects:
         solver = _projected(solver, adjoint)
@@ -149,7 +157,9 @@ def solve_scene(scene: Scene, config: SolveConfig, saveat, adjoint=None):
     )
 
 
-def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajectory:
+def solve(
+    scene: Scene, config: SolveConfig, ts=None, adjoint=None, differentiable=True
+) -> Trajectory:
     """Integrate `scene` under `config` and return its Trajectory.
 
     Usable inside `jax.grad`, `jax.vmap` and `jit`: no check here looks at array
@@ -158,6 +168,13 @@ def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajector
     default: the configuration's for a gradient) override the configuration. A
     failed solve does not raise: the Trajectory's `result` says why, with the data
     up to the failure.
+
+    `differentiable=False` is for a solve whose result nothing differentiates (a
+    saved program, a call on concrete arrays, a sweep's members): the same values,
+    from a smaller trace. diffrax then runs its plain while loops (its forward
+    mode's) rather than the checkpointed ones of reverse mode, and jaxstring's
+    Kvaerno and BDF do not wrap their Newton solves in `custom_root`, whose
+    derivative rule JAX traces with every solve (performance.md, "Compile time").
     """
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)
@@ -168,6 +185,7 @@ def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajector
         config,
         lambda fn: dfx.SaveAt(ts=ts) if fn is None else dfx.SaveAt(ts=ts, fn=fn),
         adjoint,
+        differentiable,
     )
     return Trajectory.from_solution(ts, sol.ys, sol.result, sol.stats, scene)
 
@@ -175,9 +193,18 @@ def solve(scene: Scene, config: SolveConfig, ts=None, adjoint=None) -> Trajector
 jit_solve = cpu_jit(solve)
 
 
+def _solve_values(scene, config, ts):
+    """`solve` for concrete arguments, whose result nothing differentiates."""
+    return solve(scene, config, ts, differentiable=False)
+
+
+jit_solve_values = cpu_jit(_solve_values)
+
+
 def _solve_fields(scene, config, ts):
-    """`solve`'s Trajectory as a dict of arrays (a saved program's output)."""
-    traj = solve(scene, config, ts)
+    """`solve`'s Trajectory as a dict of arrays (a saved program's output: never
+    differentiated)."""
+    traj = solve(scene, config, ts, differentiable=False)
     fields = {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
     return fields | {"result": result_code(traj.result)}
 
@@ -228,4 +255,7 @@ def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:
                 **(fields | {"result": result_from_code(fields["result"])})
             )
             return _first_rows(traj, n)
-    return _first_rows(jit_solve(scene, config, ts), n)
+    leaves = jtu.tree_leaves((scene, config, ts))
+    traced = any(isinstance(x, jax.core.Tracer) for x in leaves)
+    jitted = jit_solve if traced else jit_solve_values
+    return _first_rows(jitted(scene, config, ts), n)

@@ -144,7 +144,7 @@ def _member(vals, scene, getters, fn, config, ts):
         scene,
         [v.astype(g(scene).dtype) for v, g in zip(vals, getters)],
     )
-    traj = solve(sc, config, ts)
+    traj = solve(sc, config, ts, differentiable=False)  # a sweep's: values only
     stats = {k: v for k, v in traj.stats.items() if k != "max_steps"}
     return fn(traj, sc), result_code(traj.result), stats
 

@@ -134,3 +134,35 @@ def test_saved_program_keys_follow_every_static_value():
     assert key(js.string_pendulum(k=5), solver="tsit5") != base
     one = key(scene, solver="tsit5", max_steps=1000)
     assert key(scene, solver="tsit5", max_steps=1001) != one
+
+
+@pytest.mark.parametrize("solver", ["kvaerno5", "bdf"])
+def test_a_solve_nothing_differentiates_gives_the_same_values_from_a_smaller_trace(
+    solver,
+):
+    # simulate on concrete arrays (and a sweep's members) integrate with
+    # `differentiable=False`: diffrax's plain loops and no custom_root around the
+    # Newton solves, whose derivative rule JAX traces with every solve. The same
+    # steps and values as the solve that gradients go through.
+    from jaxstring import _integrate
+
+    scene = js.string_pendulum(formulation="natural", k=4, EA=1e4, t1=0.2)
+    config = js.SolveConfig(solver=solver, rtol=1e-6, atol=1e-6)
+    ts = jnp.linspace(0.0, 0.2, 5)
+    both = [_integrate.jit_solve(scene, config, ts)]  # the one gradients take
+    both.append(_integrate.jit_solve_values(scene, config, ts))
+    programs = [
+        str(jax.make_jaxpr(lambda sc, d=d: _integrate.solve(sc, config, ts,
+                                                            differentiable=d).ys)(scene))
+        for d in (True, False)
+    ]  # fmt: skip
+    assert "custom_root" in programs[0] and "custom_root" not in programs[1]
+    assert int(both[0].stats["num_steps"]) == int(both[1].stats["num_steps"]) > 5
+    np.testing.assert_array_equal(np.asarray(both[1].ys), np.asarray(both[0].ys))
+    # and simulate on concrete arrays (save times padded to 8: the same steps)
+    np.testing.assert_allclose(
+        np.asarray(js.simulate(scene, config=config, ts=ts).ys),
+        np.asarray(both[1].ys),
+        rtol=0,
+        atol=1e-12,
+    )

@@ -252,6 +252,10 @@ class BDF(dfx.AbstractAdaptiveSolver):
       with the state, where a stored Jacobian does not contract the Newton
       iteration (the displacement string; `build_solver` sets it from
       `SolverStructure.step_jacobians`).
+    - `differentiable`: False for a solve that nothing differentiates (a saved
+      program, a sweep's): the Newton solve is then not wrapped in `custom_root`,
+      which traces the derivative's linearisation and solve with every step,
+      derivative or not. The same values either way.
 
     For ODE terms only (`diffrax.ODETerm`); the state is one array. Use it with
     `diffrax.PIDController(rtol=rtol, atol=atol)` (the solver picks h and the order
@@ -263,6 +267,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
     max_order: int = eqx.field(static=True, default=MAX_ORDER)
     linear_solver: str = eqx.field(static=True, default="auto")
     reuse_jacobian: bool = eqx.field(static=True, default=True)
+    differentiable: bool = eqx.field(static=True, default=True)
     term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = BDFInterpolation
 
@@ -446,20 +451,20 @@ class BDF(dfx.AbstractAdaptiveSolver):
 
         def tangent_solve(g, b):
             # g(v) = (c J - I) v at the solution; exact solve (derivative passes only).
-            # custom_root traces this with every step, gradient or not: the reduced
-            # second-order factorisation (2 x 2 closed-form blocks for a string)
-            # also keeps that tracing cheap.
+            # custom_root traces this with every step of a differentiable solver,
+            # gradient or not: the reduced second-order factorisation (2 x 2
+            # closed-form blocks for a string) also keeps that tracing cheap.
             mat = _linalg.jacobian(g, b, width, g, second_order, sequential)
             return _linalg.factor(mat).solve(b)
 
         aux_types = []
-        d, aux = lax.custom_root(
-            residual,
-            jnp.zeros_like(y0),
-            solve if self.reuse_jacobian else solve_fresh,
-            tangent_solve,
-            has_aux=True,
-        )
+        newton_solve = solve if self.reuse_jacobian else solve_fresh
+        if self.differentiable:
+            d, aux = lax.custom_root(
+                residual, jnp.zeros_like(y0), newton_solve, tangent_solve, has_aux=True
+            )
+        else:
+            d, aux = newton_solve(residual, jnp.zeros_like(y0))
         treedef, types = aux_types[-1]
         aux = [lax.stop_gradient(x).astype(t) for x, t in zip(aux, types)]
         conv, n_iter, lu, c_lu, refreshed = jax.tree_util.tree_unflatten(treedef, aux)

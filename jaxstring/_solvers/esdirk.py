@@ -103,6 +103,10 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
     - `kappa`, `max_iters`: the stage iteration's safety factor and iteration limit.
     - `linear_solver`: `"auto"` (banded for strings and chains, dense otherwise),
       `"dense"` or `"banded"`.
+    - `differentiable`: False for a solve that nothing differentiates (a saved
+      program, a sweep's): the stages' iterations are then not wrapped in
+      `custom_root`, which traces the derivative's linearisation and solve with
+      every step, derivative or not. The same values either way.
     """
 
     method: str = eqx.field(static=True, default="kvaerno5")
@@ -111,6 +115,7 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
     kappa: float = eqx.field(static=True, default=0.05)
     max_iters: int = eqx.field(static=True, default=10)
     linear_solver: str = eqx.field(static=True, default="auto")
+    differentiable: bool = eqx.field(static=True, default=True)
     interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
 
     def order(self, terms):
@@ -253,5 +258,10 @@ class ESDIRK(OneStepODESolver, dfx.AbstractAdaptiveSolver):
             mat = _linalg.jacobian(g, b, width, g, second_order, sequential)
             return _linalg.factor(mat).solve(b)
 
-        f, conv = lax.custom_root(residual, f_init, solve, tangent_solve, has_aux=True)
+        if self.differentiable:
+            f, conv = lax.custom_root(
+                residual, f_init, solve, tangent_solve, has_aux=True
+            )
+        else:
+            f, conv = solve(residual, f_init)
         return f, lax.stop_gradient(conv) > 0.5

@@ -169,9 +169,11 @@ def is_adaptive(solver) -> bool:
     return SOLVERS[solver][1]
 
 
-def build_solver(solver, newton_rtol, newton_atol, scene):
+def build_solver(solver, newton_rtol, newton_atol, scene, differentiable=True):
     """Return a diffrax solver for a name (tolerances may be traced arrays) and a
-    scene (whose model chooses Kvaerno's Jacobian per stage or per step)."""
+    scene (whose model chooses Kvaerno's Jacobian per stage or per step).
+    `differentiable`: False for a solve that nothing differentiates (jaxstring's
+    own solvers then trace no derivative rules)."""
     if isinstance(solver, dfx.AbstractSolver):
         return solver
     chord = StageNewton(
@@ -179,7 +181,12 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
     )
     if solver in KVAERNO:
         if not scene.structure.stage_jacobians:
-            return ESDIRK(method=solver, rtol=newton_rtol, atol=newton_atol)
+            return ESDIRK(
+                method=solver,
+                rtol=newton_rtol,
+                atol=newton_atol,
+                differentiable=differentiable,
+            )
         # A Jacobian per stage: diffrax calls `init` for each stage's solve.
         per_stage = StageNewton(
             rtol=newton_rtol,
@@ -210,5 +217,10 @@ def build_solver(solver, newton_rtol, newton_atol, scene):
         # A stored Jacobian serves later steps unless the model says its stiff
         # directions turn too fast with the state (`SolverStructure.step_jacobians`).
         reuse = not scene.structure.step_jacobians
-        return BDF(rtol=newton_rtol, atol=newton_atol, reuse_jacobian=reuse)
+        return BDF(
+            rtol=newton_rtol,
+            atol=newton_atol,
+            reuse_jacobian=reuse,
+            differentiable=differentiable,
+        )
     raise AssertionError(solver)

@@ -90,11 +90,11 @@ def test_slack_string_has_zero_tension_where_compressed():
 def test_same_structure_does_not_recompile_for_new_parameter_values():
     from jaxstring import _integrate
 
-    before = _integrate.jit_solve.cache_size()
+    before = _integrate.jit_solve_values.cache_size()
     for EA, alpha in ((1e4, 0.01), (2e4, 0.0), (3e4, 0.05)):
         scene = js.string_pendulum(k=5, EA=EA, alpha=alpha, t1=0.05)
         assert js.simulate(scene, ts=jnp.linspace(0, 0.05, 3)).ok
-    assert _integrate.jit_solve.cache_size() - before <= 1
+    assert _integrate.jit_solve_values.cache_size() - before <= 1
 
 
 def test_other_save_times_reuse_the_compiled_solve_and_give_the_same_rows():
@@ -105,10 +105,10 @@ def test_other_save_times_reuse_the_compiled_solve_and_give_the_same_rows():
 
     scene = js.string_pendulum(k=6, EA=1e4, alpha=0.01, t1=0.05)
     ts = jnp.linspace(0.0, 0.05, 13)
-    before = _integrate.jit_solve.cache_size()
+    before = _integrate.jit_solve_values.cache_size()
     full = js.simulate(scene, ts=ts)
     part = js.simulate(scene, ts=ts[:9])
-    assert _integrate.jit_solve.cache_size() - before == 1
+    assert _integrate.jit_solve_values.cache_size() - before == 1
     assert full.ok and part.ok and part.ys.shape[0] == 9
     assert int(part.n_valid) == 9 and float(part.t_end) == float(ts[8])
     np.testing.assert_allclose(
