@@ -32,6 +32,7 @@ from .banded import (
     detect_width as detect_width,
     factor as factor,
     jacobian as jacobian,
+    jacobian_directions as jacobian_directions,
     model_jacobian as model_jacobian,
     pivoted_inverse as pivoted_inverse,
     second_order_factor as second_order_factor,

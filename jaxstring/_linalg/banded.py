@@ -955,9 +955,7 @@ def bordered_jacobian(
     B = spec.width * b
     N = math.ceil(m / spec.width)
     blocks = sorted({r // spec.width for r in spec.coupled})
-    colours = _colours_apart(blocks, N)
-    if colours is not None and 2 * (colours - 3) * B > 3 * kb:
-        colours = None
+    colours = _border_colours(spec, n, b)
     # the border's columns: unit directions in its rows (those of `spec.columns`;
     # the others are zero)
     live = np.asarray(spec.columns or range(kb), np.int32)
@@ -1002,6 +1000,33 @@ def bordered_jacobian(
     R = add_rows(N, idx, jnp.transpose(head[idx % colours], (0, 2, 1)))
     rows = jnp.transpose(R, (1, 0, 2)).reshape(kb, N * B)[:, : m * b]
     return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
+
+
+def _border_colours(spec: BorderedWidth, n, b):
+    """The band's colour count of `bordered_jacobian` for a state of `n` nodes of
+    `b` components: c >= 3 keeping the coupled super-blocks apart (`_colours_apart`),
+    or None where the transposed JVPs cost less (or no coupled rows are named)."""
+    N = math.ceil((n - spec.border) / spec.width)
+    colours = _colours_apart(sorted({r // spec.width for r in spec.coupled}), N)
+    if colours is not None and 2 * (colours - 3) * spec.width * b > 3 * spec.border * b:
+        return None
+    return colours
+
+
+def jacobian_directions(width, shape) -> int:
+    """The JVPs `jacobian` takes at a state of `shape` (node-major `(n, b)`) for
+    `width` as `choose_structure` gives it: its cost in vector fields (a transposed
+    JVP counted as one and a half)."""
+    if width is None:
+        return math.prod(shape)
+    n, b = shape
+    if not isinstance(width, BorderedWidth):
+        return 3 * width * b
+    live = len(width.columns) or width.border * b
+    colours = _border_colours(width, n, b)
+    if colours is None:
+        return 3 * width.width * b + live + math.ceil(1.5 * live)
+    return colours * width.width * b + live
 
 
 def _colours_apart(blocks, N):

@@ -34,20 +34,23 @@ How it fits into diffrax (static shapes, fixed-size solver state):
 * The factorisation of I - c J is reused across steps (CVODE also scales the chord
   correction by 2 / (1 + c / c_lu) for c != c_lu, as done here). J is evaluated at
   the predictor and I - c J factorised afresh when the Newton iteration fails with
-  the stored factorisation (scipy), or when c = h / alpha_q has changed by more
-  than 30 % since the last factorisation (also on the first step: `init` stores
-  a placeholder with c_lu = inf). The state keeps the factorisation only, not J:
-  scipy and CVODE refactorise a stored J on a change of c, but every array of the
-  solver state is copied through diffrax's accept/reject select and the while
-  loop, and J is the largest (48 doubles a node of a 2D string; its cost:
+  the stored factorisation (scipy), or when c = h / alpha_q has changed by more than
+  30 % since the last factorisation (also on the first step: `init` stores a
+  placeholder with c_lu = inf). Where J is cheap the state keeps the factorisation
+  only, not J: scipy and CVODE refactorise a stored J on a change of c, but every
+  array of the solver state is copied through diffrax's accept/reject select and the
+  while loop, and J is the largest (48 doubles a node of a 2D string; its cost:
   docs/numerics.md, "BDF"), while a fresh J costs one Jacobian evaluation on the
-  rare change of c and converges at least as well. A step whose Newton iteration
-  fails with a fresh J is rejected with factor 1/2. (diffrax keeps the solver
-  state of accepted steps only, so a Jacobian refreshed during a rejected attempt
-  is recomputed on the retry.) On the stiffest strings nearly every rejection is
-  such a Newton failure, so after a rejection the step may not grow back past 90 %
-  of the rejected one at once; that cap relaxes by 5 % per accepted step (fewer
-  attempts: docs/numerics.md, "BDF").
+  rare change of c and converges at least as well. Where a Jacobian takes
+  `KEEP_JACOBIAN_DIRECTIONS` JVPs or more (a mooring network with bodies, a network
+  of many lines: a wide band) the state keeps J too and a change of c factorises it
+  again (`keep_jacobian`); a fresh J is then taken only where the Newton iteration
+  fails with the stored one. A step whose Newton iteration fails with a fresh J is
+  rejected with factor 1/2. (diffrax keeps the solver state of accepted steps only,
+  so a Jacobian refreshed during a rejected attempt is recomputed on the retry.) On
+  the stiffest strings nearly every rejection is such a Newton failure, so after a
+  rejection the step may not grow back past 90 % of the rejected one at once; that
+  cap relaxes by 5 % per accepted step (fewer attempts: docs/numerics.md, "BDF").
 * Where the stored factorisation keeps failing, the attempt with it is skipped. In
   displacement variables the stiff springs turn with the string and a Jacobian from
   the previous step hardly ever contracts the Newton iteration (docs/numerics.md,
@@ -113,6 +116,10 @@ _RETRY_STORED = 8
 _PID_SAFETY = 0.9
 _ERROR_ORDER = 2
 _CAP_RELAX = 1.05
+KEEP_JACOBIAN_DIRECTIONS = 40
+"""`keep_jacobian="auto"` keeps J where it takes at least this many JVPs
+(`_linalg.jacobian_directions`; measured: docs/numerics.md, "BDF")."""
+
 # Stability guard: largest ratio of successive scaled backward differences to keep
 # an order >= 3, and to raise the order to >= 3.
 _DECAY_STAY = (1.0, 1.0, 1.0)  # orders 3, 4, 5
@@ -202,6 +209,7 @@ class BDFState(eqx.Module):
     n_equal: jax.Array  # steps since the last change of h or order
     lu: Any  # factorisation of I - c_lu J (J at an earlier predictor), no gradient
     c_lu: jax.Array
+    jac: Any  # that J (`keep_jacobian`), else None
     h_next: jax.Array  # the step this solver asked for next
     h_cap: jax.Array  # growth cap after a rejection (see `step`)
     n_refresh: jax.Array  # accepted steps in a row whose stored Jacobian failed
@@ -252,6 +260,10 @@ class BDF(dfx.AbstractAdaptiveSolver):
       with the state, where a stored Jacobian does not contract the Newton
       iteration (the displacement string; `build_solver` sets it from
       `SolverStructure.step_jacobians`).
+    - `keep_jacobian`: keep J itself too, and refactorise it when c changes,
+      taking a fresh J only where the Newton iteration fails with the stored one
+      (CVODE's way), or not (a change of c takes a fresh J); `"auto"` (default):
+      keep it where a Jacobian takes `KEEP_JACOBIAN_DIRECTIONS` JVPs or more.
     - `differentiable`: False for a solve that nothing differentiates (a saved
       program, a sweep's): the Newton solve is then not wrapped in `custom_root`,
       which traces the derivative's linearisation and solve with every step,
@@ -267,6 +279,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
     max_order: int = eqx.field(static=True, default=MAX_ORDER)
     linear_solver: str = eqx.field(static=True, default="auto")
     reuse_jacobian: bool = eqx.field(static=True, default=True)
+    keep_jacobian: bool | str = eqx.field(static=True, default="auto")
     differentiable: bool = eqx.field(static=True, default=True)
     term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = BDFInterpolation
@@ -282,6 +295,11 @@ class BDF(dfx.AbstractAdaptiveSolver):
                 "`linear_solver` must be one of 'auto', 'dense', 'banded'; "
                 f"got {self.linear_solver!r}."
             )
+        if self.keep_jacobian not in ("auto", True, False):
+            raise ValueError(
+                "`keep_jacobian` must be 'auto', True or False; "
+                f"got {self.keep_jacobian!r}."
+            )
 
     def order(self, terms):
         return self.max_order
@@ -296,6 +314,16 @@ class BDF(dfx.AbstractAdaptiveSolver):
 
     def _width(self, terms, t, y, args):
         return _linalg.choose_structure(_VF(), y, (t, terms, args), self.linear_solver)
+
+    def _keeps(self, width, y):
+        """Whether the state keeps J (`keep_jacobian`) for this structure."""
+        if not self.reuse_jacobian:
+            return False
+        if self.keep_jacobian == "auto":
+            return _linalg.jacobian_directions(width, y.shape) >= (
+                KEEP_JACOBIAN_DIRECTIONS
+            )
+        return bool(self.keep_jacobian)
 
     def _jacobian(self, terms, t, y, args, width, shape_only=False):
         """J(t, y); `shape_only`: for its structure only (`jax.eval_shape`), the
@@ -326,10 +354,16 @@ class BDF(dfx.AbstractAdaptiveSolver):
         structure = lambda: _linalg.factor(
             self._jacobian(terms, t0, y0, args, width, True).scale_shift(1.0, -h)
         )
-        lu = None
+        lu = jac = None
+        zeros = lambda tree: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), tree)
         if self.reuse_jacobian:
-            shapes = jax.eval_shape(structure)
-            lu = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+            lu = zeros(jax.eval_shape(structure))
+            if self._keeps(width, y0):
+                jac = zeros(
+                    jax.eval_shape(
+                        lambda: self._jacobian(terms, t0, y0, args, width, True)
+                    )
+                )
         return BDFState(
             D=self._start(terms, t0, h, y0, args),
             h=h,
@@ -337,6 +371,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             n_equal=jnp.array(0, jnp.int32),
             lu=lu,
             c_lu=jnp.asarray(jnp.inf, h.dtype),
+            jac=jac,
             h_next=h,
             h_cap=jnp.asarray(jnp.inf, h.dtype),
             n_refresh=jnp.array(0, jnp.int32),
@@ -384,8 +419,11 @@ class BDF(dfx.AbstractAdaptiveSolver):
         def residual(d):
             return c * terms.vf(t1, y_pred + d, args) - psi - d
 
-        def fresh_factor():
-            jac = self._jacobian(terms, t1, y_pred, args, width)
+        def new_jacobian():
+            return self._jacobian(terms, t1, y_pred, args, width)
+
+        def fresh_factor(jac=None):
+            jac = new_jacobian() if jac is None else jac
             return _linalg.factor(jac.scale_shift(1.0, -c))
 
         def newton(fn, d0, lu, c_lu):
@@ -413,17 +451,20 @@ class BDF(dfx.AbstractAdaptiveSolver):
             # A fresh factorisation at every step, none stored (`reuse_jacobian`).
             lu = fresh_factor()
             d, conv, k = newton(fn, d0, lu, c)
-            return with_aux(d, (conv, k, None, c, jnp.array(False)))
+            return with_aux(d, (conv, k, None, c, None, jnp.array(False)))
 
         def solve(fn, d0):
             # Skip the stored Jacobian where it has kept failing (module doc).
             skip = (st.n_refresh >= _SKIP_STORED_AFTER) & (
                 st.n_refresh % _RETRY_STORED != 0
             )
-            # The stored factorisation, or a fresh one if c moved by more than 30 %.
+            # The stored factorisation, or a fresh one if c moved by more than 30 %
+            # (with `keep_jacobian`: the stored J factorised again).
             stale_c = (jnp.abs(c / st.c_lu - 1) > _REFACTOR_CHANGE) & ~skip
             lu0 = lax.stop_gradient(st.lu)
             c_lu0 = lax.stop_gradient(st.c_lu)
+            jac0 = lax.stop_gradient(st.jac)
+            keep = self._keeps(width, y0)
 
             # First the stored factorisation, unless it is being skipped or c has
             # changed; then, if that did not converge, a fresh one: two attempts
@@ -432,22 +473,32 @@ class BDF(dfx.AbstractAdaptiveSolver):
             # are a few hundred XLA operations, an iteration a vector field and a
             # solve).
             def attempt(carry):
-                n, _, _, _, lu, c_lu, stored_ok = carry
+                n, _, _, _, lu, c_lu, jac, stored_ok = carry
                 fresh = n > 0
-                lu = lax.cond(fresh, fresh_factor, lambda: lu)
-                c_lu = jnp.where(fresh, c, c_lu)
+                if keep:
+                    jac = lax.cond(fresh, new_jacobian, lambda: jac)
+                    redo = fresh | stale_c
+                    lu = lax.cond(redo, lambda: fresh_factor(jac), lambda: lu)
+                else:
+                    redo = fresh
+                    lu = lax.cond(fresh, fresh_factor, lambda: lu)
+                c_lu = jnp.where(redo, c, c_lu)
                 d, conv, k = newton(fn, d0, lu, c_lu)
-                return n + 1, d, conv, k, lu, c_lu, stored_ok | (~fresh & conv)
+                return n + 1, d, conv, k, lu, c_lu, jac, stored_ok | (~fresh & conv)
 
             def again(carry):
                 n, _, conv = carry[:3]
                 return (n == 0) | ((n == 1) & ~conv)
 
-            first = jnp.where(skip | stale_c, 1, 0)
+            # with a stored J, a change of c refactorises it; the first step
+            # (c_lu = inf, J a placeholder) takes a fresh one
+            first = jnp.where(skip | (jnp.isinf(st.c_lu) if keep else stale_c), 1, 0)
             start = (first, d0, jnp.array(False), jnp.array(0, jnp.int32))
-            start += (lu0, c_lu0, jnp.array(False))
-            _, d, conv, k, lu, c_lu, stored_ok = lax.while_loop(again, attempt, start)
-            return with_aux(d, (conv, k, lu, c_lu, ~stored_ok & ~stale_c))
+            start += (lu0, c_lu0, jac0, jnp.array(False))
+            out = lax.while_loop(again, attempt, start)
+            _, d, conv, k, lu, c_lu, jac, stored_ok = out
+            refreshed = ~stored_ok if keep else ~stored_ok & ~stale_c
+            return with_aux(d, (conv, k, lu, c_lu, jac, refreshed))
 
         def tangent_solve(g, b):
             # g(v) = (c J - I) v at the solution; exact solve (derivative passes only).
@@ -467,7 +518,9 @@ class BDF(dfx.AbstractAdaptiveSolver):
             d, aux = newton_solve(residual, jnp.zeros_like(y0))
         treedef, types = aux_types[-1]
         aux = [lax.stop_gradient(x).astype(t) for x, t in zip(aux, types)]
-        conv, n_iter, lu, c_lu, refreshed = jax.tree_util.tree_unflatten(treedef, aux)
+        conv, n_iter, lu, c_lu, jac, refreshed = jax.tree_util.tree_unflatten(
+            treedef, aux
+        )
         y_new = y_pred + d
         finite = jnp.all(jnp.isfinite(y_new))
         conv = conv & finite
@@ -556,6 +609,7 @@ class BDF(dfx.AbstractAdaptiveSolver):
             n_equal=n_acc.astype(jnp.int32),
             lu=lu,
             c_lu=c_lu,
+            jac=jac,
             h_next=h * jnp.maximum(f_accept, 1.0),
             h_cap=h_cap,
             n_refresh=jnp.where(refreshed, st.n_refresh + 1, 0).astype(jnp.int32),

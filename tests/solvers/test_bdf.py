@@ -59,6 +59,63 @@ def _solve_linear(tol, max_order):
     )
 
 
+def _nonlinear(t, y, args):
+    # a stiff system whose Jacobian changes with the state (Robertson's kinetics)
+    del t, args
+    a, b, c = y[0], y[1], y[2]
+    return jnp.stack(
+        [
+            -0.04 * a + 1e4 * b * c,
+            0.04 * a - 1e4 * b * c - 3e7 * b**2,
+            3e7 * b**2,
+        ]
+    )
+
+
+def test_kept_jacobian_refactorised_on_a_change_of_c():
+    # `keep_jacobian`: a change of c factorises the stored J again (CVODE) rather
+    # than taking a fresh one. With a constant J (the linear system) that is the
+    # same matrix: the same steps and solution. On Robertson's stiff kinetics
+    # (J changes with the state) both reach scipy's Radau at 1e-12 within the
+    # tolerance's error, with similar step counts.
+    def run(f, y0, t1, tol, keep):
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(f),
+            BDF(rtol=tol, atol=tol, keep_jacobian=keep),
+            0.0,
+            t1,
+            None,
+            jnp.asarray(y0),
+            stepsize_controller=dfx.PIDController(rtol=tol, atol=tol),
+            max_steps=100_000,
+        )
+        return np.asarray(sol.ys[-1]), int(sol.stats["num_steps"])
+
+    (y_keep, n_keep), (y_fresh, n_fresh) = (
+        run(_linear, _Y0, _T1, 1e-6, keep) for keep in (True, False)
+    )
+    assert n_keep == n_fresh
+    np.testing.assert_allclose(y_keep, y_fresh, rtol=1e-10, atol=1e-14)
+
+    y0 = np.array([1.0, 0.0, 0.0])
+    ref = solve_ivp(
+        lambda t, y: np.asarray(_nonlinear(t, y, None)),
+        (0.0, 40.0),
+        y0,
+        method="Radau",
+        rtol=1e-12,
+        atol=1e-14,
+    ).y[:, -1]
+    steps = []
+    for keep in (True, False):
+        y, n = run(_nonlinear, y0, 40.0, 1e-6, keep)
+        assert np.max(np.abs(y - ref) / (1e-6 + 1e-6 * np.abs(ref))) < 5, (keep, y)
+        steps.append(n)
+    assert abs(steps[0] - steps[1]) <= 0.25 * steps[1], steps
+    with pytest.raises(ValueError, match="keep_jacobian"):
+        BDF(keep_jacobian="sometimes")
+
+
 @pytest.mark.parametrize(
     "max_order",
     [
