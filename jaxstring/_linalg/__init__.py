@@ -35,6 +35,7 @@ from .banded import (
     jacobian_directions as jacobian_directions,
     model_jacobian as model_jacobian,
     pivoted_inverse as pivoted_inverse,
+    pivoted_solve as pivoted_solve,
     second_order_factor as second_order_factor,
     small_inv as small_inv,
     thomas_factor as thomas_factor,

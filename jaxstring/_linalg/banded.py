@@ -500,8 +500,7 @@ def small_inv(a):
 
 def pivoted_inverse(a):
     """Inverse of a batch of small matrices `(..., B, B)` by Gauss-Jordan elimination
-    with partial pivoting, a loop over the B columns, with the batch as the last
-    (contiguous) axis so that every operation is vectorised over the batch.
+    with partial pivoting (`pivoted_solve` with the identity on the right).
 
     XLA:CPU lowers ``jnp.linalg.inv`` to one LAPACK call per matrix of the batch;
     for the 5 x 5 ... 8 x 8 blocks of a string these elementwise ops (which XLA
@@ -511,10 +510,26 @@ def pivoted_inverse(a):
     (docs/numerics.md, "Banded linear algebra").
     """
     B = a.shape[-1]
+    eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype), a.shape)
+    return pivoted_solve(a, eye)
+
+
+def pivoted_solve(a, rhs):
+    """`a^-1 rhs` for a batch of small matrices `a` `(..., B, B)` and right-hand
+    sides `rhs` `(..., B, K)`: Gauss-Jordan elimination with partial pivoting, a
+    loop over the B columns, with the batch as the last (contiguous) axis so that
+    every operation is vectorised over the batch.
+
+    No LAPACK call: XLA:CPU compiles a while loop whose body holds a custom call
+    (LAPACK's getrf, getrs, trsm) as a sequence of kernels, never as one
+    whole-loop function (performance.md, "Whole-loop kernels on the CPU"), so the
+    small dense solves inside a step (a Schur complement, the rigid bodies' mass
+    matrix) use this."""
+    B, K = a.shape[-1], rhs.shape[-1]
     batch = a.shape[:-2]
     x = jnp.moveaxis(a.reshape((-1, B, B)), 0, -1)  # (B, B, m)
-    eye = jnp.broadcast_to(jnp.eye(B, dtype=a.dtype)[:, :, None], x.shape)
-    m = jnp.concatenate([x, eye], axis=1)  # (B, 2B, m): [a | I] per batch member
+    r = jnp.moveaxis(rhs.reshape((-1, B, K)), 0, -1)  # (B, K, m)
+    m = jnp.concatenate([x, r.astype(x.dtype)], axis=1)  # (B, B + K, m): [a | rhs]
     rows = jnp.arange(B)[:, None]
 
     def column(j, m):
@@ -522,7 +537,7 @@ def pivoted_inverse(a):
         col = lax.dynamic_index_in_dim(m, j, axis=1, keepdims=False)  # (B, m)
         col = jnp.where(rows >= j, jnp.abs(col), -1.0)
         onehot = (rows == jnp.argmax(col, axis=0)[None, :]).astype(a.dtype)
-        row_p = jnp.sum(onehot[:, None, :] * m, axis=0)  # (2B, m)
+        row_p = jnp.sum(onehot[:, None, :] * m, axis=0)  # (B + K, m)
         row_j = lax.dynamic_index_in_dim(m, j, axis=0, keepdims=False)
         m = m + onehot[:, None, :] * (row_j - row_p)[None]
         row_p = row_p / lax.dynamic_index_in_dim(row_p, j, axis=0)
@@ -532,7 +547,7 @@ def pivoted_inverse(a):
         return jnp.where((rows == j)[:, :, None], row_p[None], m)
 
     m = lax.fori_loop(0, B, column, m)
-    return jnp.moveaxis(m[:, B:, :], -1, 0).reshape(batch + (B, B))
+    return jnp.moveaxis(m[:, B:, :], -1, 0).reshape(batch + (B, K))
 
 
 def bcr_factor(mat: BlockTridiagonal) -> BCRFactor:
@@ -1042,13 +1057,14 @@ def _colours_apart(blocks, N):
 
 class BorderedFactor(eqx.Module):
     """The factorisation of a `BorderedJacobian`: the band's factor, `X = D^-1 C`
-    and the LU of the Schur complement `A - R X`."""
+    and the inverse of the Schur complement `A - R X` (`pivoted_inverse`: a
+    `k b` x `k b` matrix of a few rigid objects' rows, and no LAPACK call in the
+    step's loop)."""
 
     band: eqx.Module
     X: Array
     R: Array
-    lu: Array
-    piv: Array
+    schur_inv: Array
     k: int = eqx.field(static=True)
 
     def solve(self, rhs):
@@ -1056,7 +1072,7 @@ class BorderedFactor(eqx.Module):
         b = rhs.shape[1]
         rb, rl = rhs[:k].reshape(-1), rhs[k:]
         z = self.band.solve(rl).reshape(-1)
-        xb = jsl.lu_solve((self.lu, self.piv), rb - self.R @ z)
+        xb = self.schur_inv @ (rb - self.R @ z)
         xl = z - self.X @ xb
         return jnp.concatenate([xb.reshape(k, b), xl.reshape(-1, b)])
 
@@ -1065,5 +1081,5 @@ def _bordered_factor(mat: BorderedJacobian) -> BorderedFactor:
     band = _factor(mat.band)
     m, b = mat.C.shape[0], mat.band.b
     X = jax.vmap(lambda c: band.solve(c.reshape(m // b, b)).reshape(-1), 1, 1)(mat.C)
-    lu, piv = jsl.lu_factor(mat.A - mat.R @ X)
-    return BorderedFactor(band, X, mat.R, lu, piv, mat.k)
+    schur_inv = pivoted_inverse((mat.A - mat.R @ X)[None])[0]
+    return BorderedFactor(band, X, mat.R, schur_inv, mat.k)

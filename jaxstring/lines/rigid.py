@@ -41,6 +41,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .._arrays import f64 as _f64
+from .._linalg.banded import pivoted_solve
 from ..chain import PiecewiseLinear
 from .bodies import quat_multiply, rotation_matrix
 
@@ -223,6 +224,6 @@ def group_accelerations(frames, dofs, parents, pins, sets, rots, eps=1e-12):
         tau = r.moment - jnp.cross(w, r.inertia @ w) - r.inertia @ c
         F = F + J.T @ tau
     M = M + eps * jnp.diag(jnp.diag(M))
-    u = jnp.linalg.solve(M, F)
+    u = pivoted_solve(M[None], F[None, :, None])[0, :, 0]  # no LAPACK call
     _, _, acc, alp = accelerate(u)
     return u, acc, alp
