@@ -146,6 +146,13 @@ def _unwrapped(static):
     return jtu.tree_map(lambda x: x.fn if isinstance(x, _SameCode) else x, static)
 
 
+def shown_name(fun) -> str:
+    """How a compile notice names `fun`: `_solve_fields` and `_solve_values` (a
+    solve's program variants) are "solve"."""
+    name = getattr(fun, "__name__", "a solve").lstrip("_")
+    return name.removesuffix("_fields").removesuffix("_values")
+
+
 def cpu_jit(fun):
     """Like `eqx.filter_jit` (arrays traced, everything else static and hashable),
     compiled with `CPU_COMPILER_OPTIONS` when every array argument is on the CPU.
@@ -173,7 +180,7 @@ def cpu_jit(fun):
             )
         return jitted[True]
 
-    name = getattr(fun, "__name__", "a solve").lstrip("_")
+    name = shown_name(fun)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):

@@ -45,7 +45,7 @@ from ._config import (
     program_folder,
     set_program_folder as set_program_folder,
 )
-from ._jit import compile_notice, cpu_compiler_options, cpu_jit
+from ._jit import compile_notice, cpu_compiler_options, cpu_jit, shown_name
 
 
 @functools.cache
@@ -227,7 +227,7 @@ def call(fn, *args):
     key = _key(fn, static, treedef, leaves)
     if key is None or key in _REFUSED:
         return None
-    with compile_notice(fn.__name__.lstrip("_").removesuffix("_fields")):
+    with compile_notice(shown_name(fn)):
         if key not in _LOADED:
             exported = _exported(fn, key, static, treedef, leaves)
             if exported is None:
