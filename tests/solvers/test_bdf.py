@@ -44,19 +44,25 @@ def linear_reference():
     return sol.y[:, -1]
 
 
-@eqx.filter_jit
-def _solve_linear(tol, max_order):
-    # tol is an array: one compilation per max_order.
+def _bdf_solve(f, y0, t1, tol, **bdf):
+    """diffrax's solve of dy/dt = f(t, y) from 0 to t1 with `BDF(**bdf)` at rtol =
+    atol = tol and its PID controller."""
     return dfx.diffeqsolve(
-        dfx.ODETerm(_linear),
-        BDF(rtol=tol, atol=tol, max_order=max_order),
+        dfx.ODETerm(f),
+        BDF(rtol=tol, atol=tol, **bdf),
         0.0,
-        _T1,
+        t1,
         None,
-        jnp.asarray(_Y0),
+        jnp.asarray(y0),
         stepsize_controller=dfx.PIDController(rtol=tol, atol=tol),
         max_steps=1_000_000,
     )
+
+
+@eqx.filter_jit
+def _solve_linear(tol, max_order):
+    # tol is an array: one compilation per max_order.
+    return _bdf_solve(_linear, _Y0, _T1, tol, max_order=max_order)
 
 
 def _nonlinear(t, y, args):
@@ -79,16 +85,7 @@ def test_kept_jacobian_refactorised_on_a_change_of_c():
     # (J changes with the state) both reach scipy's Radau at 1e-12 within the
     # tolerance's error, with similar step counts.
     def run(f, y0, t1, tol, keep):
-        sol = dfx.diffeqsolve(
-            dfx.ODETerm(f),
-            BDF(rtol=tol, atol=tol, keep_jacobian=keep),
-            0.0,
-            t1,
-            None,
-            jnp.asarray(y0),
-            stepsize_controller=dfx.PIDController(rtol=tol, atol=tol),
-            max_steps=100_000,
-        )
+        sol = _bdf_solve(f, y0, t1, tol, keep_jacobian=keep)
         return np.asarray(sol.ys[-1]), int(sol.stats["num_steps"])
 
     (y_keep, n_keep), (y_fresh, n_fresh) = (
