@@ -126,24 +126,6 @@ def test_pivoted_solve_is_as_accurate_as_lapack(B):
     np.testing.assert_allclose(inv @ b, x, rtol=0, atol=1e-6 * np.max(np.abs(x)))
 
 
-def test_small_dense_newton_matrices_need_no_lapack_call():
-    # Up to SMALL_DENSE rows (the tandem's 12) a dense Newton matrix is inverted in
-    # XLA operations: its solve equals LAPACK's to rounding and the compiled
-    # factor-and-solve holds no custom call; larger ones keep LAPACK's LU.
-    rng = np.random.default_rng(7)
-    for n, lapack in ((12, False), (_linalg.banded.SMALL_DENSE + 1, True)):
-        a = rng.standard_normal((n, n)) + n * np.eye(n)
-        r = rng.standard_normal(n)
-
-        def solve(a, r):
-            return _linalg.factor(_linalg.DenseJacobian(a)).solve(r)
-
-        x = np.asarray(jax.jit(solve)(a, r))
-        np.testing.assert_allclose(x, np.linalg.solve(a, r), rtol=1e-12, atol=1e-14)
-        text = jax.jit(solve).lower(a, r).as_text()
-        assert ("custom_call" in text) == lapack, n
-
-
 @pytest.mark.parametrize("B", (1, 2, 3, 4, 6, 12))
 def test_block_thomas_and_cyclic_reduction_equal_the_dense_solve(B):
     # Both eliminations of a block-tridiagonal system (the block Thomas algorithm
