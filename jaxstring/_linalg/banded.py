@@ -699,24 +699,12 @@ class DenseJacobian(eqx.Module):
 
 
 class DenseFactor(eqx.Module):
-    """A dense matrix's LU factors and pivots (LAPACK), or for a small matrix
-    (`SMALL_DENSE`) its inverse (`pivoted_inverse`) with `piv` None."""
-
     lu: Array
-    piv: Array | None
+    piv: Array
 
     def solve(self, rhs):
         flat, unravel = jfu.ravel_pytree(rhs)
-        if self.piv is None:
-            return unravel(self.lu @ flat)
         return unravel(jsl.lu_solve((self.lu, self.piv), flat))
-
-
-SMALL_DENSE = 32
-"""Dense Newton matrices up to this size are inverted by Gauss-Jordan in XLA
-operations (`pivoted_inverse`), not factorised by LAPACK: a step loop holding a
-LAPACK call is never one whole-loop kernel on XLA:CPU (the tandem's 12 x 12:
-docs/performance.md, "Whole-loop kernels on the CPU")."""
 
 
 class BandedFactor(eqx.Module):
@@ -922,8 +910,6 @@ def _factor(mat):
             return second_order_factor(mat)
         N, B = mat.diag.shape[0], mat.diag.shape[1]
         return BandedFactor(block_factor(mat), mat.n, mat.b, N, B)
-    if mat.matrix.shape[0] <= SMALL_DENSE:
-        return DenseFactor(pivoted_inverse(mat.matrix[None])[0], None)
     lu, piv = jsl.lu_factor(mat.matrix)
     return DenseFactor(lu, piv)
 
