@@ -970,7 +970,7 @@ def bordered_jacobian(
     B = spec.width * b
     N = math.ceil(m / spec.width)
     blocks = sorted({r // spec.width for r in spec.coupled})
-    colours = _border_colours(spec, n, b)
+    colours = _border_colours(spec, n)
     # the border's columns: unit directions in its rows (those of `spec.columns`;
     # the others are zero)
     live = np.asarray(spec.columns or range(kb), np.int32)
@@ -1017,13 +1017,14 @@ def bordered_jacobian(
     return BorderedJacobian(cols[:, :kb].T, rows, cols[:, kb:].T, band, k)
 
 
-def _border_colours(spec: BorderedWidth, n, b):
-    """The band's colour count of `bordered_jacobian` for a state of `n` nodes of
-    `b` components: c >= 3 keeping the coupled super-blocks apart (`_colours_apart`),
-    or None where the transposed JVPs cost less (or no coupled rows are named)."""
+def _border_colours(spec: BorderedWidth, n):
+    """The band's colour count of `bordered_jacobian` for a state of `n` nodes:
+    c >= 3 keeping the coupled super-blocks apart (`_colours_apart`), or None where
+    the transposed JVPs cost less (or no coupled rows are named)."""
     N = math.ceil((n - spec.border) / spec.width)
     colours = _colours_apart(sorted({r // spec.width for r in spec.coupled}), N)
-    if colours is not None and 2 * (colours - 3) * spec.width * b > 3 * spec.border * b:
+    # (c - 3) B more JVPs than the band's, against 1.5 k b transposed ones more
+    if colours is not None and 2 * (colours - 3) * spec.width > 3 * spec.border:
         return None
     return colours
 
@@ -1038,7 +1039,7 @@ def jacobian_directions(width, shape) -> int:
     if not isinstance(width, BorderedWidth):
         return 3 * width * b
     live = len(width.columns) or width.border * b
-    colours = _border_colours(width, n, b)
+    colours = _border_colours(width, n)
     if colours is None:
         return 3 * width.width * b + live + math.ceil(1.5 * live)
     return colours * width.width * b + live
