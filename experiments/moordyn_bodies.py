@@ -31,11 +31,14 @@ Cases (MoorDyn's tests ``bodies.cpp``, ``bodies_and_rods.cpp``, ``rods.cpp``,
   initial-condition solve (Init); jaxstring: its static solve of the free nodes.
 
 Times: MoorDyn, best of 3 of the whole run (Create, Init with its
-initial-condition solve, the Step calls); jaxstring, the deck read and static
+initial-condition solve, the Step calls), at the deck's dtM and at its largest
+stable step (the deck's doubled while the run stays finite and within 1.5 times
+the deck step's distance from the reference); jaxstring, the deck read and static
 solve (setup) apart, the first call (trace and compile, without a persistent
 compilation cache) apart, the run best of 3 after compilation. Equal agreement:
-jaxstring's loosest tolerance at which it is as close to the analytic solution
-(or to its own run at the tests' tolerance) as MoorDyn is, and its time then.
+jaxstring's fastest run, of the loosest tolerance at which it is as close to the
+analytic solution (or to its own run at the tests' tolerance) as MoorDyn is and
+the next tighter one, and its time then.
 
 Run: ``python experiments/moordyn_bodies.py [--quick] [--whole-loops]`` (quick:
 one repeat, without BodiesAndRods and RodPinnedFloating; ``--whole-loops``:
@@ -49,6 +52,7 @@ docs/img/).
 import contextlib
 import math
 import os
+import re
 import shutil
 import struct
 import tempfile
@@ -118,6 +122,18 @@ class Deck:
         self.path = os.path.join(workdir, os.path.basename(name))
         shutil.copy(self.src, self.path)
 
+    def at_step(self, dtM):
+        """A copy of the deck beside it with its time step dtM replaced."""
+        text, n = re.subn(
+            r"^\S+(\s+dtM\b)", f"{dtM!r}\\1", open(self.src).read(), flags=re.M
+        )
+        if n != 1:
+            raise ValueError(f"{self.src}: no single dtM option")
+        stem, ext = os.path.splitext(self.path)
+        path = f"{stem}_dtM{dtM:.6g}{ext}"
+        open(path, "w").write(text)
+        return path
+
 
 @contextlib.contextmanager
 def md_system(path, x=(), xd=()):
@@ -176,8 +192,8 @@ def orbital_body(workdir, repeats):
     radius, omega, r0 = 10.0, 0.2, np.array([0.0, 0.0, 20.0])
     deck = Deck(workdir, "body_tests/orbitalBody.txt")
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             n = moordyn.GetNumberBodies(s)
             bodies = [moordyn.GetBody(s, i + 1) for i in range(n)]
@@ -233,6 +249,7 @@ def orbital_body(workdir, repeats):
     row["_match"] = (
         scene, t_md, lambda tr: tr.obs["body_position"], p_md, p_js, exact
     )  # fmt: skip
+    row["_md_step"] = (deck, lambda path: md_run(path)[1])
     return row, {"t": t_md, "md": p_md, "js": p_js, "r0": r0, "radius": radius}
 
 
@@ -285,8 +302,8 @@ def rotating_body(workdir, repeats):
     c, legs, T, X, checks, ends = _rotating_body_path()
     dt = 0.1
 
-    def md_run():
-        with md_system(deck.path, c + [2.0, 0, 0], [0.0] * 3) as s:
+    def md_run(path=deck.path):
+        with md_system(path, c + [2.0, 0, 0], [0.0] * 3) as s:
             dtM = md_dt(s)
             point, body = moordyn.GetPoint(s, 8), moordyn.GetBody(s, 1)
             t = 0.0
@@ -344,6 +361,7 @@ def rotating_body(workdir, repeats):
         "js_steps": int(traj.stats["num_steps"]),
     }  # fmt: skip
     row["_match"] = (scene, checks, lambda tr: point8(tr) - c, p8_md, p8_js)
+    row["_md_step"] = (deck, lambda path: md_run(path)[0])
     return row, None
 
 
@@ -353,9 +371,9 @@ def pinned_body(workdir, repeats):
     deck = Deck(workdir, "body_tests/pinnedBody.txt")
     a, dt = 0.5, 0.01
 
-    def md_run():
+    def md_run(path=deck.path):
         x, xd = np.array([0, 0, -5.0, 0, 0, 0]), np.zeros(6)
-        with md_system(deck.path, x, xd) as s:
+        with md_system(path, x, xd) as s:
             dtM = md_dt(s)
             body = moordyn.GetBody(s, 1)
             roll, t, t_int, i, j = [], 0.0, 0.0, 0, 0
@@ -412,6 +430,7 @@ def pinned_body(workdir, repeats):
         roll_md,
         roll_js,
     )
+    row["_md_step"] = (deck, lambda path: md_run(path)[0])
     return row, {"t": ts, "md": roll_md, "js": roll_js, "theta": theta}
 
 
@@ -420,8 +439,8 @@ def body_drag(workdir, repeats):
 
     deck = Deck(workdir, "body_tests/bodyDrag.txt")
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             body = moordyn.GetBody(s, 1)
             ts, z, t = [0.0], [moordyn.GetBodyState(body)[0][2]], 0.0
@@ -456,6 +475,7 @@ def body_drag(workdir, repeats):
         z_md,
         z_js,
     )
+    row["_md_step"] = (deck, lambda path: md_run(path)[1])
     return row, None
 
 
@@ -464,8 +484,8 @@ def bodies_and_rods(workdir, repeats):
 
     deck = Deck(workdir, "BodiesAndRods.dat")
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             body = moordyn.GetBody(s, 1)
             z = []
@@ -493,6 +513,7 @@ def bodies_and_rods(workdir, repeats):
         "js_run_s": run, "js_steps": int(traj.stats["num_steps"]),
     }  # fmt: skip
     row["_match"] = (scene, ts, lambda tr: tr.obs["body_position"][:, 0, 2], z_md, z_js)
+    row["_md_step"] = (deck, lambda path: md_run(path)[0])
     return row, None
 
 
@@ -502,8 +523,8 @@ def _rod_after_10s(workdir, name, repeats):
 
     deck = Deck(workdir, name)
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             rods = [moordyn.GetRod(s, i + 1) for i in range(moordyn.GetNumberRods(s))]
             md_step(s, [], [], 0.0, 10.0)
@@ -512,11 +533,11 @@ def _rod_after_10s(workdir, name, repeats):
 
     (nodes_md, dtM), md_s = best_of(md_run, repeats)
     scene, setup_s, _ = common.clock(lambda: lines.read_moordyn(deck.src, t1=10.0))
-    return deck, nodes_md, dtM, md_s, scene, setup_s
+    return deck, nodes_md, dtM, md_s, scene, setup_s, md_run
 
 
 def rod_hanging(workdir, repeats):
-    deck, nodes_md, dtM, md_s, scene, setup_s = _rod_after_10s(
+    deck, nodes_md, dtM, md_s, scene, setup_s, md_run = _rod_after_10s(
         workdir, "RodHanging.txt", repeats
     )
     rtol = 1e-6
@@ -543,11 +564,12 @@ def rod_hanging(workdir, repeats):
         "js_steps": int(traj.stats["num_steps"]),
     }  # fmt: skip
     row["_match"] = (scene, ts, lambda tr: tr.obs["rod_nodes"][-1], nodes_md, nodes_js)
+    row["_md_step"] = (deck, lambda path: md_run(path)[0])
     return row, None
 
 
 def rod_pinned_floating(workdir, repeats):
-    deck, nodes_md, dtM, md_s, scene, setup_s = _rod_after_10s(
+    deck, nodes_md, dtM, md_s, scene, setup_s, md_run = _rod_after_10s(
         workdir, "RodPinnedFloating.txt", repeats
     )
     rtol = 1e-8
@@ -570,6 +592,7 @@ def rod_pinned_floating(workdir, repeats):
         "js_steps": int(traj.stats["num_steps"]),
     }  # fmt: skip
     row["_match"] = (scene, ts, lambda tr: tr.obs["rod_nodes"][-1], nodes_md, nodes_js)
+    row["_md_step"] = (deck, lambda path: md_run(path)[0])
     return row, None
 
 
@@ -580,8 +603,8 @@ def added_mass(workdir, repeats):
     m, V = 200.0, 2 * math.pi * 0.25**2
     acc = (RHO * V * G - m * G) / (m + RHO * V)
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             rod = moordyn.GetRod(s, 1)
             ts, z, t = [], [], 0.0
@@ -621,6 +644,7 @@ def added_mass(workdir, repeats):
         scene, t_md, lambda tr: tr.obs["rod_nodes"][:, :, 2], z_md, z_js,
         np.broadcast_to(exact, z_md.shape),
     )  # fmt: skip
+    row["_md_step"] = (deck, lambda path: md_run(path)[1])
     return row, None
 
 
@@ -647,8 +671,8 @@ def beam(workdir, repeats, name, segments):
 
     deck = Deck(workdir, f"{name}.txt")
 
-    def md_run():
-        with md_system(deck.path) as s:
+    def md_run(path=deck.path):
+        with md_system(path) as s:
             dtM = md_dt(s)
             line = moordyn.GetLine(s, 1)
             n = moordyn.GetLineNumberNodes(line)
@@ -691,6 +715,59 @@ def beam(workdir, repeats, name, segments):
     return row, {"md": x_md, "js": nodes}
 
 
+def _distance(a, ref) -> float:
+    """Largest |a - ref| over the samples both have (a MoorDyn run at another
+    step may stop a sample earlier or later)."""
+    a, ref = np.asarray(a), np.asarray(ref)
+    n = min(len(a), len(ref))
+    return float(np.max(np.abs(a[:n] - ref[:n])))
+
+
+MD_GROWTH = 1.5
+"""MoorDyn's step is grown while its run completes with finite values and its
+distance from the reference stays within this factor of the deck step's (the rule
+of the chain cases in moordyn_cases.py)."""
+
+MD_MAX_STEP = 0.1
+"""The largest MoorDyn step tried (s): the cases' coupling steps."""
+
+
+def md_largest_step(md_step, dtM, md_dev, ref, repeats):
+    """MoorDyn at its largest stable step: the deck's dtM doubled, then one
+    geometric midpoint towards the first step that failed, while the run
+    completes with finite values and stays within `MD_GROWTH` times the deck
+    step's distance `md_dev` from `ref`. Returns (dtM, distance, best wall s) of
+    the largest step that passed, or None where none above the deck's did."""
+    deck, run = md_step
+
+    def passes(dt):
+        try:
+            vals = np.asarray(run(deck.at_step(dt)), dtype=float)
+        except RuntimeError:  # "MoorDyn reported an error integrating"
+            return None
+        if not np.all(np.isfinite(vals)):
+            return None
+        d = _distance(vals, ref)
+        return d if d <= MD_GROWTH * md_dev + 1e-12 else None
+
+    good, failed, dt = None, None, 2 * dtM
+    while dt <= MD_MAX_STEP:
+        d = passes(dt)
+        if d is None:
+            failed = dt
+            break
+        good, dt = (dt, d), 2 * dt
+    if failed is not None:
+        mid = math.sqrt((good[0] if good else dtM) * failed)
+        d = passes(mid)
+        if d is not None:
+            good = (mid, d)
+    if good is None:
+        return None
+    _, wall = best_of(lambda: run(deck.at_step(good[0])), repeats)
+    return good[0], good[1], wall
+
+
 # The solvers and tolerances tried for equal agreement, loosest first: the
 # explicit Tsit5 of the tests and jaxstring's stiff BDF (a multistep method of
 # order at most 5: not tried below 1e-6). BDF's error at loose tolerances does not
@@ -702,38 +779,80 @@ MATCH_RTOLS = {
 }
 
 
-def matched(row, match, repeats):
-    """jaxstring at equal agreement: for each solver of MATCH_RTOLS, the loosest
-    tolerance whose run is as close to the reference (the analytic solution where
-    there is one, else jaxstring's run at the tests' tolerance) as MoorDyn's run
-    is, in the compared quantity, and its best run time; the faster of the
-    solvers that agree (else the closest run), and the speed-up then."""
+class Matcher:
+    """jaxstring's runs of one case at the tolerances of MATCH_RTOLS, each
+    simulated and timed once, against a reference `ref` in the compared
+    quantity."""
+
+    def __init__(self, scene, ts, pick, ref, repeats):
+        self.scene, self.ts, self.pick, self.ref = scene, ts, pick, ref
+        self.repeats, self.devs, self.walls = repeats, {}, {}
+
+    def _sim(self, solver, rtol):
+        return js.simulate(self.scene, solver, rtol=rtol, atol=rtol, ts=self.ts)
+
+    def dev(self, solver, rtol):
+        if (solver, rtol) not in self.devs:
+            traj = self._sim(solver, rtol)
+            d = _distance(self.pick(traj), self.ref)
+            self.devs[solver, rtol] = d if traj.ok else math.inf
+        return self.devs[solver, rtol]
+
+    def wall(self, solver, rtol):
+        if (solver, rtol) not in self.walls:
+            _, run = best_of(lambda: self._sim(solver, rtol), self.repeats)
+            self.walls[solver, rtol] = run
+        return self.walls[solver, rtol]
+
+    def match(self, target):
+        """For each solver, its loosest tolerance whose run is within `target` of
+        the reference and the next tighter one (a stability-bound explicit run
+        can be faster there), the faster of the two; of the solvers, the fastest
+        that agrees, else the closest run. Returns (solver, rtol, distance, wall
+        s, agrees)."""
+        found = []
+        for solver, rtols in MATCH_RTOLS.items():
+            i = next(
+                (k for k, r in enumerate(rtols) if self.dev(solver, r) <= target),
+                None,
+            )
+            if i is None:
+                r = min(rtols, key=lambda r: self.dev(solver, r))
+                found.append((True, self.dev(solver, r), solver, r))
+                continue
+            for r in rtols[i : i + 2]:
+                if self.dev(solver, r) <= target:
+                    found.append((False, self.wall(solver, r), solver, r))
+        _, _, solver, rtol = min(found)
+        dev = self.dev(solver, rtol)
+        return solver, rtol, dev, self.wall(solver, rtol), dev <= target
+
+
+def matched(row, match, md_step, repeats):
+    """jaxstring at equal agreement with MoorDyn, at the deck's step and at
+    MoorDyn's largest stable step (`md_largest_step`): MoorDyn's largest distance
+    in the compared quantity from the reference (the analytic solution where there
+    is one, else jaxstring's run at the tests' tolerance), jaxstring's fastest
+    run at least as close (`Matcher.match`) and the speed-ups."""
     scene, ts, pick, md, tight, *exact = match
     ref = np.asarray(exact[0] if exact else tight)
-    md_dev = float(np.max(np.abs(np.asarray(md) - ref)))
-
-    def sim(solver, rtol):
-        return js.simulate(scene, solver, rtol=rtol, atol=rtol, ts=ts)
-
-    found = []
-    for solver, rtols in MATCH_RTOLS.items():
-        for rtol in rtols:
-            traj = sim(solver, rtol)
-            dev = float(np.max(np.abs(np.asarray(pick(traj)) - ref)))
-            if not traj.ok:
-                dev = math.inf
-            if dev <= md_dev:
-                break
-        _, run = best_of(lambda: sim(solver, rtol), repeats)
-        found.append(
-            (dev > md_dev, run if dev <= md_dev else dev, solver, rtol, dev, run)
-        )
-    _, _, solver, rtol, dev, run = min(found)
+    md_dev = _distance(md, ref)
+    m = Matcher(scene, ts, pick, ref, repeats)
+    solver, rtol, dev, run, ok = m.match(md_dev)
     row.update(md_dev=md_dev, js_match_code=f"{solver} rtol={rtol:g}",
                js_match_dev=dev,
                match_ref="analytic" if exact else "jaxstring tight",
-               match_ok=bool(dev <= md_dev),
-               js_match_s=run, speedup_match=row["md_s"] / run)  # fmt: skip
+               match_ok=bool(ok), js_match_s=run,
+               speedup_match=row["md_s"] / run)  # fmt: skip
+    big = md_largest_step(md_step, row["md_dtM"], md_dev, ref, repeats)
+    if big is None:
+        big, code = (row["md_dtM"], md_dev, row["md_s"]), (solver, rtol, dev, run, ok)
+    else:
+        code = m.match(big[1])
+    row.update(md_max_dtM=big[0], md_max_dev=big[1], md_max_s=big[2],
+               js_max_code=f"{code[0]} rtol={code[1]:g}", js_max_dev=code[2],
+               js_max_s=code[3], max_ok=bool(code[4]),
+               speedup_max=big[2] / code[3])  # fmt: skip
 
 
 # ---------------------------------------------------------------------------
@@ -832,7 +951,7 @@ def main(quick=False, repeats=None, whole_loops=False):
         for key, fn in cases:
             row, s = fn(workdir, repeats)
             if "_match" in row:
-                matched(row, row.pop("_match"), repeats)
+                matched(row, row.pop("_match"), row.pop("_md_step"), repeats)
             row["speedup"] = row["md_s"] / row["js_run_s"]
             row["speedup_with_setup"] = row["md_s"] / (
                 row["js_run_s"] + row["js_setup_s"]
@@ -849,7 +968,8 @@ def main(quick=False, repeats=None, whole_loops=False):
         "case quantity test_limit moordyn jaxstring analytic diff diff_of md_err "
         "js_err md_dtM md_s js_code js_ok js_steps js_setup_s js_compile_s js_run_s "
         "speedup md_dev match_ref js_match_code js_match_dev match_ok js_match_s "
-        "speedup_match speedup_with_setup load_1min"
+        "speedup_match md_max_dtM md_max_dev md_max_s js_max_code js_max_dev "
+        "max_ok js_max_s speedup_max speedup_with_setup load_1min"
     ).split()
     common.write_table(
         f"moordyn_bodies{tag}",
@@ -881,10 +1001,17 @@ def main(quick=False, repeats=None, whole_loops=False):
             "the tests' tolerance, then md_dev = diff); js_match_code: for "
             "Tsit5 (rtol = atol = 1e-2 ... 1e-10) and BDF (1e-2, 5e-3, 3e-3, 2e-3, "
             "1e-3 ... 2e-6), the "
-            "loosest tolerance whose run is at least as close to it, and of the "
-            "two the faster (js_match_dev; match_ok False: no run was, the closest "
-            "is timed); js_match_s: its best run time (compiled before timing); "
-            "speedup_match: md_s / js_match_s.",
+            "loosest tolerance whose run is at least as close to it and the next "
+            "tighter one, the fastest of these runs (js_match_dev; match_ok False: "
+            "no run was, the closest is timed); js_match_s: its best run time "
+            "(compiled before timing); speedup_match: md_s / js_match_s.",
+            "MoorDyn at its largest stable step: md_max_dtM, the deck's dtM "
+            "doubled (at most 0.1 s), then one geometric midpoint towards the "
+            "first step that failed, while MoorDyn's run completes with finite "
+            "values and its distance from the reference stays within 1.5 md_dev "
+            "(md_max_dev; the deck's step where no larger one passed); md_max_s: "
+            "its best time; js_max_code, js_max_dev, max_ok, js_max_s: jaxstring "
+            "matched to md_max_dev as above; speedup_max: md_max_s / js_max_s.",
             "speedup: md_s / js_run_s (> 1: jaxstring faster); speedup_with_setup: "
             "md_s / (js_run_s + js_setup_s). load_1min: the load average when the "
             "row was measured (the machine has 2 cores and is shared).",
