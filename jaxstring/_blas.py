@@ -24,13 +24,21 @@ def one_blas_thread():
     if "OPENBLAS_NUM_THREADS" in os.environ:
         yield
         return
-    # The OpenBLAS that XLA:CPU's LAPACK calls loads with SciPy's LAPACK (at the
-    # first factorisation otherwise, after the limit would have been applied).
-    import scipy.linalg.cython_lapack  # noqa: F401
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _controller().limit(limits=1, user_api="blas"):
         yield
+
+
+@functools.cache
+def _controller():
+    """threadpoolctl's view of the loaded BLAS libraries, found once: a fresh
+    `threadpool_limits` looks for them again on every call (about 0.4 ms, longer
+    than a small solve's run). The OpenBLAS that XLA:CPU's LAPACK calls loads
+    with SciPy's LAPACK, imported first (at the first factorisation otherwise,
+    after the limit would have been applied)."""
+    import scipy.linalg.cython_lapack  # noqa: F401
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
 
 
 def single_blas_thread(fn):

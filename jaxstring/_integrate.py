@@ -247,7 +247,7 @@ def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:
     n = ts.shape[0]
     ts = _padded(ts)
     # the padded times decide the save times; n_save is static, so one value serves
-    config = config.replace(n_save=ts.shape[0])
+    config = config.replace_unchecked(n_save=ts.shape[0])
     if not config.progress and _programs.usable((scene, config, ts)):
         fields = _programs.call(_solve_fields, scene, config, ts)
         if fields is not None:

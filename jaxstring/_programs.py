@@ -215,6 +215,7 @@ def usable(args) -> bool:
 
 _LOADED = {}  # key -> the compiled call of a saved program, in this process
 _REFUSED = set()  # keys whose programs cannot be exported (host callbacks)
+_COMPILED = {}  # key -> its loaded program, once called (compiled) in this process
 
 
 def call(fn, *args):
@@ -227,6 +228,9 @@ def call(fn, *args):
     key = _key(fn, static, treedef, leaves)
     if key is None or key in _REFUSED:
         return None
+    loaded = _LOADED.get(key)
+    if loaded is not None and _COMPILED.get(key) is loaded:  # nothing to announce
+        return loaded(*leaves)
     with compile_notice(shown_name(fn)):
         if key not in _LOADED:
             exported = _exported(fn, key, static, treedef, leaves)
@@ -235,7 +239,9 @@ def call(fn, *args):
             _LOADED[key] = jax.jit(
                 exported.call, compiler_options=cpu_compiler_options()
             )
-        return _LOADED[key](*leaves)
+        out = _LOADED[key](*leaves)
+    _COMPILED[key] = _LOADED[key]
+    return out
 
 
 def call_or_jit(fn, jitted, *args):

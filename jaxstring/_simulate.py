@@ -63,5 +63,7 @@ def simulate(
     config = solver_for(solve_config("simulate", config, **options), scene)
     config.check_scene(scene)
     ts = config.save_times(scene.t0, scene.t1)
-    scene, solve_config_, ts = config.placed((scene, config.replace(ts=None), ts))
+    scene, solve_config_, ts = config.placed(
+        (scene, config.replace_unchecked(ts=None), ts)
+    )
     return solve_compiled(scene, solve_config_, ts)

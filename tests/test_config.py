@@ -106,13 +106,13 @@ def test_solves_run_under_the_limit(monkeypatch):
 
     monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
     calls = []
-    real = threadpoolctl.threadpool_limits
+    real = threadpoolctl.ThreadpoolController.limit
 
-    def spy(*args, **kwargs):
+    def spy(self, *args, **kwargs):
         calls.append(kwargs.get("limits"))
-        return real(*args, **kwargs)
+        return real(self, *args, **kwargs)
 
-    monkeypatch.setattr(threadpoolctl, "threadpool_limits", spy)
+    monkeypatch.setattr(threadpoolctl.ThreadpoolController, "limit", spy)
     scene = js.pendulum.string_pendulum(k=3, t1=0.05)
     js.simulate(scene, n_save=3)
     assert calls == [1]

@@ -136,6 +136,38 @@ def test_saved_program_keys_follow_every_static_value():
     assert key(scene, solver="tsit5", max_steps=1001) != one
 
 
+def test_the_unchecked_replacements_of_a_solve_give_the_checked_configuration():
+    """`simulate` replaces the save count and times of a checked configuration
+    without checking them again: the same configuration, the same saved-program
+    key, and the cached defaults are the defaults."""
+    import equinox as eqx
+    import jax.tree_util as jtu
+
+    from jaxstring import _integrate, _programs
+
+    scene = js.string_pendulum(k=4)
+    config = js.SolveConfig(solver="tsit5", rtol=1e-3, ts=np.linspace(0.0, 1.0, 5))
+
+    def key(c):
+        dynamic, static = eqx.partition((scene, c), eqx.is_array)
+        leaves, treedef = jtu.tree_flatten(dynamic)
+        return _programs._full_key(_integrate._solve_fields, static, treedef, leaves)
+
+    for fields in ({"n_save": 32}, {"ts": None}, {"ts": None, "n_save": 8}):
+        fast, checked = config.replace_unchecked(**fields), config.replace(**fields)
+        assert type(fast) is type(checked)
+        assert eqx.tree_equal(fast, checked)
+        assert key(fast) == key(checked)
+    assert key(config.replace_unchecked(n_save=32)) != key(config)
+    for purpose in ("simulate", "identify", "sweep"):
+        assert eqx.tree_equal(
+            js.SolveConfig.default(purpose),
+            js.SolveConfig(
+                **(js.SOLVE_DEFAULTS["simulate"] | js.SOLVE_DEFAULTS[purpose])
+            ),
+        )
+
+
 @pytest.mark.parametrize("solver", ["kvaerno5", "bdf"])
 def test_a_solve_nothing_differentiates_gives_the_same_values_from_a_smaller_trace(
     solver,
