@@ -94,6 +94,19 @@ from .rigid import (
 from .rods import Rod, RodEnd, rod_loads
 
 
+SURFACE_BAND = 1e-3
+"""Half-width of the band about the still-water surface, m, over which
+`submerged_fraction` blends MoorDyn's fully wet or dry value into its value for a
+segment across the surface (as the seabed's contact edge is smoothed over 1 mm)."""
+
+
+def _smooth_step(x):
+    """0 for x <= -1, 1 for x >= 1, C1 between (3 w^2 - 2 w^3), and
+    `_smooth_step(-x) = 1 - _smooth_step(x)`."""
+    w = jnp.clip(0.5 * (x + 1.0), 0.0, 1.0)
+    return w * w * (3.0 - 2.0 * w)
+
+
 def submerged_fraction(z_a, z_b, qs, radius):
     """Submerged fraction of each segment under the still-water surface z = 0
     (MoorDyn's `Line::calcSubSeg`), `(S,)`: 1 with both nodes below it, 0 with
@@ -104,8 +117,17 @@ def submerged_fraction(z_a, z_b, qs, radius):
 
     with phi the segment's angle from the vertical and r its radius: a
     horizontal segment of diameter d whose axis lies on the surface is half
-    submerged. Like MoorDyn's, F jumps (by up to r sin(phi) / (z_max + 2 r
-    sin(phi))) when a node of a thick, inclined segment crosses the surface.
+    submerged. MoorDyn's F jumps (by up to r sin(phi) / (z_max + 2 r sin(phi)))
+    when a node of a thick, inclined segment crosses the surface; a float node
+    whose buoyancy jumps there has no equilibrium, and an adaptive solver's step
+    collapses on it (MoorDyn's fixed step chatters across it). Here the jump is
+    a C1 ramp over `SURFACE_BAND` either side of the surface,
+
+        F = F_x + s(-z_max / b) (1 - F_x) - s(z_min / b) F_x,
+
+    F_x the formula above (clipped to [0, 1]) and s a smooth step from 0 at -1
+    to 1 at +1: MoorDyn's value wherever neither node lies within b of the
+    surface.
 
     **Arguments:** the node heights `z_a`, `z_b` `(S,)`, m; the unit segment
     directions `qs` `(S, 3)`; the segment radii `radius` `(S,)`, m.
@@ -117,7 +139,10 @@ def submerged_fraction(z_a, z_b, qs, radius):
     # a segment lying flat on the surface (zero span and no radius): half, as
     # MoorDyn's
     frac = jnp.where(den > 0, (reach - zmin) / jnp.where(den > 0, den, 1.0), 0.5)
-    return jnp.where(zmax < 0, 1.0, jnp.where(zmin > 0, 0.0, frac))
+    frac = jnp.clip(frac, 0.0, 1.0)
+    below = _smooth_step(-zmax / SURFACE_BAND)  # 1: the upper node under the band
+    above = _smooth_step(zmin / SURFACE_BAND)  # 1: the lower node over it
+    return frac + below * (1.0 - frac) - above * frac
 
 
 def _none_or_f64(x):

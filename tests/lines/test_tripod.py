@@ -33,6 +33,7 @@ import pytest
 import jaxstring as js
 from jaxstring import lines
 from jaxstring.lines.models import submerged_fraction
+from jaxstring.testing.moordyn_start import from_moordyn_nodes
 
 
 def test_submerged_fraction_of_a_thick_segment():
@@ -54,10 +55,55 @@ def test_submerged_fraction_of_a_thick_segment():
     qv = jnp.array([[0.0, 0.0, 1.0]])
     F = submerged_fraction(jnp.array([-0.3]), jnp.array([0.1]), qv, jnp.array([r]))
     np.testing.assert_allclose(F, [0.75], rtol=1e-14)
-    # a horizontal segment whose axis lies just above the surface is half wet
+    # a horizontal segment whose axis lies on the surface is half wet
     qh = jnp.array([[1.0, 0.0, 0.0]])
-    F = submerged_fraction(jnp.array([-1e-9]), jnp.array([1e-9]), qh, jnp.array([r]))
-    np.testing.assert_allclose(F, [0.5], rtol=1e-8)
+    F = submerged_fraction(jnp.array([0.0]), jnp.array([0.0]), qh, jnp.array([r]))
+    np.testing.assert_allclose(F, [0.5], rtol=1e-14)
+
+
+def test_submerged_fraction_is_continuous_across_the_surface():
+    """MoorDyn's fraction jumps where a node of a thick inclined segment crosses
+    the surface (from 1 to 0.5 for a near-horizontal float segment): a node
+    floating there has no equilibrium and an adaptive step collapses on it. Here
+    it ramps over +-SURFACE_BAND: continuous, monotone in each node's height,
+    within [0, 1], and MoorDyn's value once the node is out of the band."""
+    from jaxstring.lines.models import SURFACE_BAND
+
+    r, b = 0.41, SURFACE_BAND
+    q = jnp.array([[0.99, 0.0, 0.1411]]) / math.hypot(0.99, 0.1411)
+    reach = r * float(np.linalg.norm(q[0, :2]))
+    z_lo = -0.0018  # the lower node, under the band
+
+    def F(z_hi):
+        z_hi = jnp.asarray(z_hi, jnp.float64)
+        return submerged_fraction(
+            jnp.full_like(z_hi, z_lo), z_hi, q, jnp.full_like(z_hi, r)
+        )
+
+    crossing = lambda z: (reach - z_lo) / (z - z_lo + 2 * reach)  # MoorDyn's, z > 0
+    z = np.linspace(-3 * b, 3 * b, 6001)
+    f = np.asarray(F(z))
+    assert np.all((f >= 0) & (f <= 1)) and np.all(np.diff(f) <= 1e-15)
+    assert np.max(np.abs(np.diff(f))) < 1e-3  # a jump of 0.5 before
+    np.testing.assert_array_equal(f[z <= -b], 1.0)
+    np.testing.assert_allclose(f[z >= b], crossing(z[z >= b]), rtol=1e-14)
+    assert abs(crossing(0.0) - 0.5) < 0.01  # the jump MoorDyn makes at z = 0
+    # the lower node leaving the water: from MoorDyn's crossing value to 0
+    g = lambda zl: submerged_fraction(
+        jnp.asarray(zl),
+        jnp.full_like(jnp.asarray(zl), 0.3),
+        q,
+        jnp.full_like(jnp.asarray(zl), r),
+    )
+    zl = np.linspace(-3 * b, 3 * b, 6001)
+    fl = np.asarray(g(zl))
+    assert np.max(np.abs(np.diff(fl))) < 1e-3 and np.all(np.diff(fl) <= 1e-15)
+    np.testing.assert_array_equal(fl[zl >= b], 0.0)
+    np.testing.assert_allclose(
+        fl[zl <= -b],
+        (reach - zl[zl <= -b]) / (0.3 - zl[zl <= -b] + 2 * reach),
+        rtol=1e-14,
+    )
 
 
 def _moordyn(tmp_path, dtM=None):
@@ -78,16 +124,7 @@ def _scene_from(moordyn, system, t1):
     draws a taut line as an elastic catenary, jaxstring's as a straight one:
     up to 4 cm apart)."""
     scene = lines.read_moordyn(lines.case_path("tripod.txt"), t1=t1, static=False)
-    m = scene.model
-    top = m.topology
-    rows, slot = np.asarray(top.tri_rows), np.asarray(top.body)
-    y0 = np.array(scene.y0)
-    for k in range(m.n_lines):
-        line = moordyn.GetLine(system, k + 1)
-        for i, n in enumerate(m.line_nodes(k)):
-            if slot[n] < len(rows):
-                y0[rows[slot[n]], :3] = moordyn.GetLineNodePos(line, i)
-    return eqx.tree_at(lambda s: s.y0, scene, jnp.asarray(y0))
+    return from_moordyn_nodes(scene, moordyn, system)
 
 
 def _point_positions(model, nodes):
