@@ -31,10 +31,11 @@ def one_blas_thread():
 @functools.cache
 def _controller():
     """threadpoolctl's view of the loaded BLAS libraries, found once: a fresh
-    `threadpool_limits` looks for them again on every call (about 0.4 ms, longer
-    than a small solve's run). The OpenBLAS that XLA:CPU's LAPACK calls loads
-    with SciPy's LAPACK, imported first (at the first factorisation otherwise,
-    after the limit would have been applied)."""
+    `threadpool_limits` looks for them again on every call, which costs more
+    than a small solve's run (docs/performance.md, "Compile time"). The
+    OpenBLAS that XLA:CPU's LAPACK calls loads with SciPy's LAPACK, imported
+    first (at the first factorisation otherwise, after the limit would have been
+    applied)."""
     import scipy.linalg.cython_lapack  # noqa: F401
     from threadpoolctl import ThreadpoolController
 

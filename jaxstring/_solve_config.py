@@ -208,8 +208,8 @@ class SolveConfig(eqx.Module):
     def replace_unchecked(self, **fields) -> "SolveConfig":
         """`replace` for values already checked (jaxstring's own: the padded
         save count, no save times), without converting and checking every field
-        again: a small solve's call costs less (a checked `replace` takes about
-        0.13 ms)."""
+        again, which is a measurable part of a small solve's call
+        (docs/performance.md, "Compile time")."""
         new = object.__new__(type(self))
         for name in FIELDS:
             object.__setattr__(new, name, fields.get(name, getattr(self, name)))
