@@ -664,7 +664,7 @@ def tripod(workdir, repeats):
     node positions (`jaxstring.testing.moordyn_start`)."""
     import moordyn
 
-    from jaxstring.testing.moordyn_start import from_moordyn_nodes
+    from jaxstring.testing.moordyn_start import from_moordyn_nodes, point_nodes
 
     deck = Deck(workdir, "tripod.txt")
     base = deck.at_step(TRIPOD_DTM)
@@ -689,12 +689,7 @@ def tripod(workdir, repeats):
             return from_moordyn_nodes(scene, moordyn, s)
 
     scene, setup_s, _ = common.clock(read)
-    at = {}
-    for k, (a, b) in enumerate(scene.model.attach):
-        idx = scene.model.line_nodes(k)
-        at.setdefault(a, idx[0])
-        at.setdefault(b, idx[-1])
-    order = [at[i] for i in range(len(scene.model.points))]
+    order = point_nodes(scene.model)
 
     def points(tr):
         return tr.obs["nodes"][:, order]

@@ -4,7 +4,9 @@ MoorDyn draws each line's initial profile as an elastic catenary, or as a straig
 line where its catenary solve fails; jaxstring starts a taut line straight. To
 compare the two codes' dynamics from one state (the tripod deck's lines start up
 to 4 cm apart), `from_moordyn_nodes` puts MoorDyn's initial node positions into
-the scene's initial state. Needs the `moordyn` package (the ``bench`` extra).
+the scene's initial state, and `point_nodes` gives the node each of MoorDyn's
+points is (to compare point positions). `from_moordyn_nodes` needs the `moordyn`
+package (the ``bench`` extra).
 """
 
 import equinox as eqx
@@ -31,3 +33,15 @@ def from_moordyn_nodes(scene, moordyn, system):
             if slot[n] < len(rows):
                 y0[rows[slot[n]], :3] = moordyn.GetLineNodePos(line, i)
     return eqx.tree_at(lambda s: s.y0, scene, jnp.asarray(y0))
+
+
+def point_nodes(model) -> list:
+    """The node index of each point of a deck's `model`, in the deck's order (a
+    point is the end node of the lines attached to it): index the `nodes`
+    observable with it for the points' positions."""
+    at = {}
+    for k, (a, b) in enumerate(model.attach):
+        idx = model.line_nodes(k)
+        at.setdefault(a, idx[0])
+        at.setdefault(b, idx[-1])
+    return [at[i] for i in range(len(model.points))]

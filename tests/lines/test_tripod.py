@@ -33,7 +33,7 @@ import pytest
 import jaxstring as js
 from jaxstring import lines
 from jaxstring.lines.models import submerged_fraction
-from jaxstring.testing.moordyn_start import from_moordyn_nodes
+from jaxstring.testing.moordyn_start import from_moordyn_nodes, point_nodes
 
 
 def test_submerged_fraction_of_a_thick_segment():
@@ -129,12 +129,7 @@ def _scene_from(moordyn, system, t1):
 
 def _point_positions(model, nodes):
     """`(..., n_points, 3)` from the `nodes` observable."""
-    at = {}
-    for k, (a, b) in enumerate(model.attach):
-        idx = model.line_nodes(k)
-        at.setdefault(a, idx[0])
-        at.setdefault(b, idx[-1])
-    return np.stack([nodes[..., at[i], :] for i in range(len(model.points))], -2)
+    return nodes[..., point_nodes(model), :]
 
 
 def test_tripod_accelerations_match_moordyn(tmp_path):
