@@ -22,6 +22,7 @@ import contextlib
 import functools
 import sys
 import threading
+import time
 import types
 
 import equinox as eqx
@@ -66,26 +67,77 @@ NOTICE_AFTER_S = 3.0
 """A compiled call still preparing its program after this long says so on stderr."""
 
 
+class _Notices:
+    """The compile notices of the blocks running now, printed by one daemon
+    thread when a block's time is up. A block only enters and leaves a dict (a
+    `threading.Timer` per block would start a thread at every call, a measurable
+    part of a small solve's call). The thread sleeps until the earliest deadline
+    (at most `NOTICE_AFTER_S`, so that a block entered meanwhile is seen in time;
+    woken early only for a deadline before its wake-up) and ends after a quiet
+    interval (the next block starts it again)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._due = {}  # token -> (monotonic deadline, name)
+        self._thread = None
+        self._wake = threading.Event()
+        self._wake_at = 0.0
+
+    def enter(self, name: str):
+        token = object()
+        deadline = time.monotonic() + NOTICE_AFTER_S
+        with self._lock:
+            self._due[token] = (deadline, name)
+            if self._thread is None:
+                self._thread = threading.Thread(
+                    target=self._watch, name="jaxstring-compile-notice", daemon=True
+                )
+                self._thread.start()
+            elif deadline < self._wake_at:
+                self._wake.set()
+        return token
+
+    def leave(self, token) -> None:
+        self._due.pop(token, None)
+
+    def _watch(self):
+        quiet = 0
+        while True:
+            with self._lock:
+                now = time.monotonic()
+                due = [t for t, (d, _) in self._due.items() if d <= now]
+                names = [self._due.pop(t)[1] for t in due]
+                quiet = 0 if self._due or names else quiet + 1
+                if quiet > 1:  # nothing ran for a while: start again when needed
+                    self._thread = None
+                    return
+                self._wake_at = min(
+                    (d for d, _ in self._due.values()), default=now + NOTICE_AFTER_S
+                )
+                self._wake.clear()
+            for name in names:
+                print(
+                    f"jaxstring: compiling {name} for this structure (once; later "
+                    "calls with new parameter values reuse it) ...",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            self._wake.wait(max(self._wake_at - now, 0.0) + 1e-3)
+
+
+_NOTICES = _Notices()
+
+
 @contextlib.contextmanager
 def compile_notice(name: str):
     """Print one line on stderr if the block (a jitted call: tracing, compiling and
     dispatching) takes more than `NOTICE_AFTER_S`, so that a first call that
     compiles a large solve is not taken for a hang."""
-    timer = threading.Timer(
-        NOTICE_AFTER_S,
-        lambda: print(
-            f"jaxstring: compiling {name} for this structure (once; later calls "
-            "with new parameter values reuse it) ...",
-            file=sys.stderr,
-            flush=True,
-        ),
-    )
-    timer.daemon = True
-    timer.start()
+    token = _NOTICES.enter(name)
     try:
         yield
     finally:
-        timer.cancel()
+        _NOTICES.leave(token)
 
 
 class _SameCode:
@@ -136,14 +188,55 @@ def _same(a, b):
     return a is b
 
 
-def _code_keyed(static):
-    return jtu.tree_map(
-        lambda x: _SameCode(x) if isinstance(x, types.FunctionType) else x, static
+class _Static:
+    """The static part of a compiled call's arguments: their tree structure, which
+    leaves are arrays, and the other leaves (a function as `_SameCode`). Equal
+    and hashed as a structure and a tuple: cheap next to hashing a scene's
+    modules field by field at every call."""
+
+    __slots__ = ("treedef", "is_array", "others", "_hash")
+
+    def __init__(self, treedef, is_array, others):
+        self.treedef, self.is_array, self.others = treedef, is_array, others
+        self._hash = hash((treedef, is_array, others))
+
+    def __eq__(self, other):
+        return (
+            isinstance(other, _Static)
+            and self._hash == other._hash
+            and self.treedef == other.treedef
+            and self.is_array == other.is_array
+            and self.others == other.others
+        )
+
+    def __hash__(self):
+        return self._hash
+
+    def tree(self, arrays):
+        """The arguments again, from `arrays` (the dynamic leaves)."""
+        arrays, others = iter(arrays), iter(self.others)
+        leaves = [
+            next(arrays) if a else _unwrapped(next(others)) for a in self.is_array
+        ]
+        return jtu.tree_unflatten(self.treedef, leaves)
+
+
+def split_arrays(tree):
+    """(the array leaves of `tree`, a `_Static` of the rest): what `eqx.partition`
+    with `eqx.is_array` separates, in one flattening."""
+    leaves, treedef = jtu.tree_flatten(tree)
+    is_array = tuple(eqx.is_array(x) for x in leaves)
+    arrays = [x for x, a in zip(leaves, is_array) if a]
+    others = tuple(
+        _SameCode(x) if isinstance(x, types.FunctionType) else x
+        for x, a in zip(leaves, is_array)
+        if not a
     )
+    return arrays, _Static(treedef, is_array, others)
 
 
-def _unwrapped(static):
-    return jtu.tree_map(lambda x: x.fn if isinstance(x, _SameCode) else x, static)
+def _unwrapped(x):
+    return x.fn if isinstance(x, _SameCode) else x
 
 
 def shown_name(fun) -> str:
@@ -153,6 +246,12 @@ def shown_name(fun) -> str:
     return name.removesuffix("_fields").removesuffix("_values")
 
 
+@functools.cache
+def cpu_only() -> bool:
+    """Whether JAX has CPU devices only (then every array is on one)."""
+    return all(d.platform == "cpu" for d in jax.devices())
+
+
 def cpu_jit(fun):
     """Like `eqx.filter_jit` (arrays traced, everything else static and hashable),
     compiled with `CPU_COMPILER_OPTIONS` when every array argument is on the CPU.
@@ -160,15 +259,12 @@ def cpu_jit(fun):
     (`_SameCode`), not by identity."""
 
     def call(dynamic, static):
-        args, items = eqx.combine(dynamic, _unwrapped(static))
+        args, items = static.tree(dynamic)
         return fun(*args, **dict(items))
 
     def split(args, kwargs):
-        # keyword arguments as sorted (name, value) pairs: hashable when static
-        dynamic, static = eqx.partition(
-            (args, tuple(sorted(kwargs.items()))), eqx.is_array
-        )
-        return dynamic, _code_keyed(static)
+        # keyword arguments as sorted (name, value) pairs
+        return split_arrays((args, tuple(sorted(kwargs.items()))))
 
     jitted = {False: jax.jit(call, static_argnums=1)}
 
@@ -186,12 +282,17 @@ def cpu_jit(fun):
     def wrapper(*args, **kwargs):
         ensure_compilation_cache()
         dynamic, static = split(args, kwargs)
-        leaves = [x for x in jtu.tree_leaves(dynamic) if isinstance(x, jax.Array)]
         # Inside another trace (a caller's jit, vmap or grad) the outer compilation
         # decides the options, and JAX refuses them on a nested jit.
-        traced = any(isinstance(x, jax.core.Tracer) for x in leaves)
-        on_cpu = not traced and all(
-            d.platform == "cpu" for x in leaves for d in x.devices()
+        traced = any(isinstance(x, jax.core.Tracer) for x in dynamic)
+        on_cpu = not traced and (
+            cpu_only()
+            or all(
+                d.platform == "cpu"
+                for x in dynamic
+                if isinstance(x, jax.Array)
+                for d in x.devices()
+            )
         )
         jit = cpu_jitted() if on_cpu else jitted[False]
         if traced:

@@ -45,7 +45,14 @@ from ._config import (
     program_folder,
     set_program_folder as set_program_folder,
 )
-from ._jit import compile_notice, cpu_compiler_options, cpu_jit, shown_name
+from ._jit import (
+    compile_notice,
+    cpu_compiler_options,
+    cpu_jit,
+    cpu_only,
+    shown_name,
+    split_arrays,
+)
 
 
 @functools.cache
@@ -109,22 +116,22 @@ def _outside_source(classes) -> str | None:
 _KEYS = {}  # _memo(...) -> _key(...), in this process
 
 
-def _memo(fn, static, treedef, leaves):
+def _memo(fn, parts, leaves):
     """What decides `_key` in this process, hashable (equal for equal static
     values of equal types: a float by its bits), or None where a static value
     is not hashable: the repr behind `_key` of a large scene takes milliseconds,
-    longer than a small solve."""
+    longer than a small solve. `parts`: the `split_arrays` structure of the
+    arguments; `leaves`: their arrays."""
 
     def exact(x):
         return (type(x), x.hex() if isinstance(x, float) else x)
 
-    static_leaves, static_def = jtu.tree_flatten(static)
     memo = (
         fn,
-        static_def,
-        tuple(exact(x) for x in static_leaves),
-        treedef,
-        tuple((x.shape, str(x.dtype)) for x in leaves),
+        parts.treedef,
+        parts.is_array,
+        tuple(exact(x) for x in parts.others),
+        tuple((x.shape, x.dtype) for x in leaves),
     )
     try:
         hash(memo)
@@ -133,14 +140,18 @@ def _memo(fn, static, treedef, leaves):
     return memo
 
 
-def _key(fn, static, treedef, leaves) -> str | None:
-    memo = _memo(fn, static, treedef, leaves)
+def _key(fn, args):
+    """(the saved-program key of `fn(*args)`, or None where it has no stable one;
+    the array leaves of `args`, in the order of the program's parameters)."""
+    leaves, parts = split_arrays(args)
+    memo = _memo(fn, parts, leaves)
     if memo is not None and memo in _KEYS:
-        return _KEYS[memo]
-    key = _full_key(fn, static, treedef, leaves)
+        return _KEYS[memo], leaves
+    dynamic, static = eqx.partition(args, eqx.is_array)
+    key = _full_key(fn, static, jtu.tree_structure(dynamic), leaves)
     if memo is not None:
         _KEYS[memo] = key
-    return key
+    return key, leaves
 
 
 class _Named:
@@ -205,10 +216,15 @@ def usable(args) -> bool:
     every array is a concrete CPU array."""
     if program_folder() is None:
         return False
+    only_cpu = cpu_only()
     for x in jtu.tree_leaves(args):
         if isinstance(x, jax.core.Tracer):
             return False
-        if isinstance(x, jax.Array) and any(d.platform != "cpu" for d in x.devices()):
+        if (
+            not only_cpu
+            and isinstance(x, jax.Array)
+            and any(d.platform != "cpu" for d in x.devices())
+        ):
             return False
     return True
 
@@ -223,9 +239,7 @@ def call(fn, *args):
     in dicts, lists and tuples; None where no program can be saved (no stable key,
     or the traced function holds host callbacks): the caller then runs `fn` its
     usual way."""
-    dynamic, static = eqx.partition(args, eqx.is_array)
-    leaves, treedef = jtu.tree_flatten(dynamic)
-    key = _key(fn, static, treedef, leaves)
+    key, leaves = _key(fn, args)
     if key is None or key in _REFUSED:
         return None
     loaded = _LOADED.get(key)
@@ -233,6 +247,8 @@ def call(fn, *args):
         return loaded(*leaves)
     with compile_notice(shown_name(fn)):
         if key not in _LOADED:
+            dynamic, static = eqx.partition(args, eqx.is_array)
+            treedef = jtu.tree_structure(dynamic)
             exported = _exported(fn, key, static, treedef, leaves)
             if exported is None:
                 return None
@@ -261,7 +277,8 @@ def saved_export(fn, static, treedef, leaves):
     ensure_compilation_cache()
     if program_folder() is None:
         return None
-    return _exported(fn, _key(fn, static, treedef, leaves), static, treedef, leaves)
+    args = eqx.combine(jtu.tree_unflatten(treedef, leaves), static)
+    return _exported(fn, _key(fn, args)[0], static, treedef, leaves)
 
 
 def _exported(fn, key, static, treedef, leaves):

@@ -7,6 +7,7 @@ defaults live in `SOLVE_DEFAULTS`, one row per purpose; docs/numerics.md ("Solve
 defaults") gives the measurements each row was chosen from.
 """
 
+import dataclasses
 import functools
 from typing import Any
 
@@ -108,6 +109,21 @@ def _f64(x):
 FIELDS = tuple(SOLVE_DEFAULTS["simulate"])
 
 
+class _plain:
+    """A method of `SolveConfig` read as a plain callable. Equinox returns every
+    method read from a module as a bound-method module (a pytree, so that it can
+    be passed to `jax.jit`), built anew at each read for some tens of
+    microseconds: several a call, a measurable part of a small solve's call
+    (docs/performance.md). These methods run outside any trace."""
+
+    def __init__(self, fn):
+        self.fn = fn
+        functools.update_wrapper(self, fn)
+
+    def __get__(self, obj, cls=None):
+        return self.fn if obj is None else functools.partial(self.fn, obj)
+
+
 class SolveConfig(eqx.Module):
     """Every setting of a solve: solver, step-size control, save times, adjoint,
     limits.
@@ -194,6 +210,7 @@ class SolveConfig(eqx.Module):
         check_choice("purpose", purpose, PURPOSES)
         return _defaults(cls, purpose)
 
+    @_plain
     def replace(self, **fields) -> "SolveConfig":
         """This configuration with `fields` replaced (names of `FIELDS`; checked)."""
         unknown = sorted(set(fields) - set(FIELDS))
@@ -202,29 +219,37 @@ class SolveConfig(eqx.Module):
                 f"unknown solve option(s) {', '.join(map(repr, unknown))}; valid: "
                 f"{', '.join(FIELDS)}."
             )
-        values = {name: getattr(self, name) for name in FIELDS} | fields
-        return type(self)(**values)
+        converted = {
+            name: _CONVERTERS[name](value) if name in _CONVERTERS else value
+            for name, value in fields.items()
+        }
+        new = self.replace_unchecked(**converted)
+        new.__check_init__()
+        return new
 
+    @_plain
     def replace_unchecked(self, **fields) -> "SolveConfig":
         """`replace` for values already checked (jaxstring's own: the padded
         save count, no save times), without converting and checking every field
         again, which is a measurable part of a small solve's call
         (docs/performance.md, "Compile time")."""
         new = object.__new__(type(self))
-        for name in FIELDS:
-            object.__setattr__(new, name, fields.get(name, getattr(self, name)))
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(fields)
         return new
 
     @property
     def adaptive(self) -> bool:
         return is_adaptive(self.solver)
 
+    @_plain
     def newton_tolerances(self):
         """(rtol, atol) of the stage Newton iteration."""
         nr = self.rtol if self.newton_rtol is None else self.newton_rtol
         na = self.atol if self.newton_atol is None else self.newton_atol
         return nr, na
 
+    @_plain
     def initial_step(self):
         """`dt0`, or the fixed step of a fixed-step solver, as an array (None for an
         adaptive solver's own choice)."""
@@ -232,6 +257,7 @@ class SolveConfig(eqx.Module):
             return _f64(FIXED_STEP_DT0)
         return self.dt0
 
+    @_plain
     def save_times(self, t0, t1):
         """`ts`, or `n_save` equally spaced times over [t0, t1], float64."""
         if self.ts is not None:
@@ -239,6 +265,7 @@ class SolveConfig(eqx.Module):
         n = self.n_save
         return host_op(lambda xp, a, b: xp.linspace(a, b, n, dtype=xp.float64), t0, t1)
 
+    @_plain
     def adjoint_for(self, derivative: str = "gradient"):
         """The diffrax adjoint of a solve whose derivative is a `"gradient"` of a
         scalar (reverse mode under "auto") or a `"jacobian"` of residuals
@@ -248,6 +275,7 @@ class SolveConfig(eqx.Module):
         checkpoints = self.checkpoints if isinstance(self.checkpoints, int) else None
         return make_adjoint(self.adjoint, checkpoints)
 
+    @_plain
     def on_cpu(self) -> bool:
         """Whether a single solve of this configuration runs on a CPU (`device`
         "auto" always does)."""
@@ -257,6 +285,7 @@ class SolveConfig(eqx.Module):
             return jax.default_backend() == "cpu"
         return self.device.platform == "cpu"
 
+    @_plain
     def solve_device(self):
         """The `jax.Device` a single solve of this configuration runs on."""
         if self.device == "auto":
@@ -265,6 +294,7 @@ class SolveConfig(eqx.Module):
             return jax.local_devices()[0]
         return self.device
 
+    @_plain
     def placed(self, tree):
         """`tree` (a solve's arguments) on the configuration's device: the host CPU
         under "auto", as it is under "default"."""
@@ -280,6 +310,7 @@ class SolveConfig(eqx.Module):
         dynamic, static = eqx.partition(tree, eqx.is_array)
         return eqx.combine(jax.device_put(dynamic, device), static)
 
+    @_plain
     def check_scene(self, scene) -> None:
         """Refuse settings that do not fit `scene` (save times outside its span; an
         adjoint that cannot handle a projecting model), naming the field."""
@@ -298,6 +329,15 @@ class SolveConfig(eqx.Module):
                 f"constraint ({type(scene.model).__name__}); use 'recursive' or "
                 "'forward', or project=False."
             )
+
+
+_CONVERTERS = {
+    f.name: f.metadata["converter"]
+    for f in dataclasses.fields(SolveConfig)
+    if "converter" in f.metadata
+}
+"""The conversion of each field that has one (`replace` converts the fields it
+is given; the others are converted already)."""
 
 
 @functools.cache

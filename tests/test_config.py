@@ -174,3 +174,30 @@ def test_a_function_written_anew_at_each_call_reuses_the_compiled_call():
     # other code, same captures: its own program
     assert float(apply(jnp.arange(3.0), lambda x: x + two)[2]) == 4.0
     assert apply.cache_size() == 3
+
+
+def test_a_long_compiled_call_says_so_once_and_a_short_one_stays_quiet(
+    monkeypatch, capsys
+):
+    # One line on stderr for a block that outlasts the notice time (a compiling
+    # first call), none for blocks that end in time, however many run.
+    import time
+
+    from jaxstring import _jit
+
+    monkeypatch.setattr(_jit, "NOTICE_AFTER_S", 0.2)
+    for _ in range(200):
+        with _jit.compile_notice("quick"):
+            pass
+    start = time.monotonic()
+    with _jit.compile_notice("slow one"):
+        err = ""
+        while "slow one" not in err and time.monotonic() < start + 10.0:
+            time.sleep(0.02)
+            err += capsys.readouterr().err
+        said = time.monotonic() - start
+    time.sleep(0.5)
+    err += capsys.readouterr().err
+    assert err.count("jaxstring: compiling slow one for this structure") == 1
+    assert "quick" not in err
+    assert 0.2 <= said < 1.0  # when the time was up, not at the watcher's pace

@@ -236,9 +236,11 @@ def _two_structures():
 
 def _same_fit(one, two):
     assert two.converged, two.message
-    # The same steps, but for the last, far below the tolerance: rounding decides
-    # whether the iteration stops one step earlier.
-    assert abs(two.iterations - one.iterations) <= 1
+    # The same steps, but for the last ones, taken at a cost at the rounding level
+    # of the data (1e-14): rounding decides whether the iteration stops a step or
+    # two earlier (workers compile with whole-loop kernels, another rounding; 22
+    # against 20 iterations on an AMD EPYC, 1 apart on an Intel Xeon).
+    assert abs(two.iterations - one.iterations) <= 3
     for name in ("alpha", "EA"):
         assert two.values[name] == pytest.approx(one.values[name], rel=1e-10)
         assert two.std[name] == pytest.approx(one.std[name], rel=1e-8)

@@ -121,7 +121,8 @@ def test_saved_program_keys_follow_every_static_value():
         dynamic, static = eqx.partition((scene, config), eqx.is_array)
         leaves, treedef = jtu.tree_flatten(dynamic)
         fn = _integrate._solve_fields
-        memo = _programs._key(fn, static, treedef, leaves)
+        memo, arrays = _programs._key(fn, (scene, config))
+        assert all(a is b for a, b in zip(arrays, leaves, strict=True))
         assert memo == _programs._full_key(fn, static, treedef, leaves)
         return memo
 
