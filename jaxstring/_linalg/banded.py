@@ -971,17 +971,35 @@ def bordered_jacobian(
     N = math.ceil(m / spec.width)
     blocks = sorted({r // spec.width for r in spec.coupled})
     colours = _border_colours(spec, n)
-    # the border's columns: unit directions in its rows (those of `spec.columns`;
-    # the others are zero)
+    # the border's columns: unit directions in its rows (those of `spec.columns`,
+    # the entries the vector field reads and changes)
     live = np.asarray(spec.columns or range(kb), np.int32)
     border_seeds = np.zeros((live.size, n, b))
     border_seeds[:, :k] = np.eye(kb)[live].reshape(live.size, k, b)
+    # The other entries' columns are zero in the vector field's Jacobian, but not
+    # in that of a relation built on it (an implicit stage's u - a h f(y_i + a h u),
+    # a tangent solve's (c J - I) v, a fixed step's residual): there they are the
+    # relation's identity part, diagonal. One JVP along their sum gives those
+    # diagonal entries (zeros for the vector field itself).
+    dead = np.setdiff1d(np.arange(kb), live)
+    dead_seed = np.zeros((int(dead.size > 0), n, b))
+    dead_seed.reshape(-1, n * b)[:, dead] = 1.0
+    on_dead = np.zeros((kb, n * b))
+    on_dead[dead, dead] = 1.0
+    column_seeds = np.concatenate([border_seeds, dead_seed])
 
-    def unit_columns(out):  # J e_c for every c of the border, (kb, n b)
+    def unit_columns(out):  # J e_c for every live c of the border, (kb, n b)
         out = out.reshape(live.size, n * b)
         if live.size == kb:
             return out
         return add_rows(kb, live, out)
+
+    def border_columns(out):  # J e_c for every c of the border, (kb, n b)
+        out = out.reshape(column_seeds.shape[0], n * b)
+        cols = unit_columns(out[: live.size])
+        if dead.size:
+            cols = cols + jnp.asarray(on_dead, out.dtype) * out[live.size :]
+        return cols
 
     if colours is None:
         band = block_tridiagonal_jacobian(
@@ -992,7 +1010,7 @@ def bordered_jacobian(
             second_order,
             sequential,
         )
-        cols = unit_columns(jax.vmap(linear_fn)(jnp.asarray(border_seeds, y.dtype)))
+        cols = border_columns(jax.vmap(linear_fn)(jnp.asarray(column_seeds, y.dtype)))
         transpose = jax.linear_transpose(linear_fn, y)
         rows = jax.vmap(lambda s: transpose(s)[0])(jnp.asarray(border_seeds, y.dtype))
         rows = unit_columns(rows)[:, kb:]
@@ -1000,13 +1018,13 @@ def bordered_jacobian(
     # the band's coloured directions and the border's columns in one batch
     band_seeds = np.zeros((colours * B, n, b))
     band_seeds[:, k:] = _band_seeds(m, b, spec.width, colours)
-    seeds = jnp.asarray(np.concatenate([band_seeds, border_seeds]), y.dtype)
+    seeds = jnp.asarray(np.concatenate([band_seeds, column_seeds]), y.dtype)
     out = jax.vmap(linear_fn)(seeds)
     nb = colours * B
     band = _band_from_jvps(
         out[:nb, k:], m, b, spec.width, colours, second_order, sequential
     )
-    cols = unit_columns(out[nb:])  # cols[c] = J e_c
+    cols = border_columns(out[nb:])  # cols[c] = J e_c
     # out[r B + c, :k]: the border's rows of J e_c over the super-blocks of
     # colour r, that is of the one coupled super-block there (the others add
     # zeros)
@@ -1039,10 +1057,11 @@ def jacobian_directions(width, shape) -> int:
     if not isinstance(width, BorderedWidth):
         return 3 * width * b
     live = len(width.columns) or width.border * b
+    dead = int(live < width.border * b)  # one JVP for the unread entries
     colours = _border_colours(width, n)
     if colours is None:
-        return 3 * width.width * b + live + math.ceil(1.5 * live)
-    return colours * width.width * b + live
+        return 3 * width.width * b + live + dead + math.ceil(1.5 * live)
+    return colours * width.width * b + live + dead
 
 
 def _colours_apart(blocks, N):

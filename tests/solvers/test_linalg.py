@@ -429,6 +429,59 @@ def test_bordered_jacobian_and_solve_equal_dense(second_order, hooks, coupled):
         np.testing.assert_allclose(x, dense, rtol=1e-11, atol=1e-12)
 
 
+@pytest.mark.parametrize("coupled", [(), (0, 5)])
+def test_bordered_jacobian_of_an_implicit_relation_keeps_its_identity(coupled):
+    # A border of two rows whose second row the vector field neither reads nor
+    # changes (a rigid object's unused components): the model names the entries in
+    # use (`columns`). In the vector field's Jacobian the others' columns are zero;
+    # in an implicit stage's relation u - c f(y + c u) and a tangent solve's
+    # c J v - v they are the identity's: the bordered Jacobian of each relation
+    # equals jacfwd, and so does its solve.
+    rng = np.random.default_rng(11)
+    n, k = 10, 2
+    K = jnp.asarray(rng.uniform(1.0, 3.0, n - k))
+    hook = np.zeros(n - k)
+    hook[[0, 5]] = 1.0
+    hook = jnp.asarray(hook)
+
+    def fn(y):
+        vb, q, v = y[0], y[k:, :3], y[k:, 3:]
+        qp = jnp.concatenate([q[:1], q[:-1]])
+        qn = jnp.concatenate([q[1:], q[-1:]])
+        a = K[:, None] * (qp - 2 * q + qn) + hook[:, None] * (vb[:3] - q) ** 3
+        db = jnp.concatenate([vb[3:], -jnp.sum(hook[:, None] * (vb[:3] - q), 0)])
+        border = jnp.stack([db, jnp.zeros(6)])
+        return jnp.concatenate([border, jnp.concatenate([v, a - 0.1 * v], axis=1)])
+
+    y = jnp.asarray(rng.standard_normal((n, 6)))
+    spec = _linalg.BorderedWidth(1, k, coupled, tuple(range(6)))
+    c = 0.05
+    relations = {
+        "stage": lambda u: u - c * fn(y + c * u),
+        "tangent": lambda u: c * jax.jvp(fn, (y,), (u,))[1] - u,
+        "vector field": fn,
+    }
+    for name, g in relations.items():
+        mat = jax.jit(lambda u: _linalg.jacobian(g, u, spec, second_order=3))(y)
+        J = np.asarray(
+            jax.jacfwd(lambda u: g(u.reshape(y.shape)).reshape(-1))(y.reshape(-1))
+        )
+        dense = np.asarray(jax.jit(lambda m: m.to_dense())(mat))
+        np.testing.assert_allclose(dense, J, atol=1e-13, err_msg=name)
+        if name != "vector field":
+            rhs = rng.standard_normal(y.shape)
+            x = np.asarray(
+                jax.jit(lambda m, r: _linalg.factor(m).solve(r))(mat, jnp.asarray(rhs))
+            )
+            np.testing.assert_allclose(
+                x.reshape(-1),
+                np.linalg.solve(J, rhs.reshape(-1)),
+                rtol=1e-10,
+                atol=1e-12,
+                err_msg=name,
+            )
+
+
 @pytest.mark.parametrize(
     "deck, EI, width",
     [
