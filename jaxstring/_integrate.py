@@ -249,10 +249,9 @@ def _first_rows(traj: Trajectory, n: int) -> Trajectory:
     the same, as the padding repeats the last time.
 
     A cut's first time in a process goes through the host (`host_map`: no
-    compilation, but a transfer call per array back to the device, ~0.6 ms for the
-    two dozen arrays of a mooring scene); a cut of the same arrays and `n` that
-    comes again (a loop of solves, a fit) runs as one compiled program (`_cut`),
-    compiled once for a few tens of milliseconds."""
+    compilation, but a transfer call per array back to the device); a cut of the
+    same arrays and `n` that comes again (a loop of solves) runs as one compiled
+    program (`_cut`), compiled once (docs/performance.md, "Compile time")."""
     if traj.ts.shape[0] == n:
         return traj
     rows = ((traj.ts, traj.ys, traj.obs), traj.n_valid)

@@ -112,9 +112,9 @@ FIELDS = tuple(SOLVE_DEFAULTS["simulate"])
 class _plain:
     """A method of `SolveConfig` read as a plain callable. Equinox returns every
     method read from a module as a bound-method module (a pytree, so that it can
-    be passed to `jax.jit`), built anew at each read for some tens of
-    microseconds: several a call, a measurable part of a small solve's call
-    (docs/performance.md). These methods run outside any trace."""
+    be passed to `jax.jit`), built anew at each read: several a call, a
+    measurable part of a small solve's call (docs/performance.md). These methods
+    run outside any trace."""
 
     def __init__(self, fn):
         self.fn = fn
