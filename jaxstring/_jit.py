@@ -198,18 +198,20 @@ class _Static:
 
     def __init__(self, treedef, is_array, others):
         self.treedef, self.is_array, self.others = treedef, is_array, others
-        self._hash = hash((treedef, is_array, others))
+        self._hash = None
 
     def __eq__(self, other):
         return (
             isinstance(other, _Static)
-            and self._hash == other._hash
             and self.treedef == other.treedef
             and self.is_array == other.is_array
             and self.others == other.others
         )
 
     def __hash__(self):
+        # TypeError for an unhashable static value, as for any static argument
+        if self._hash is None:
+            self._hash = hash((self.treedef, self.is_array, self.others))
         return self._hash
 
     def tree(self, arrays):
