@@ -459,6 +459,15 @@ STUDIES = (
         ),
     ),
     Study(
+        "moordyn_solvers",
+        "moordyn_solvers.py",
+        "every solver on every MoorDyn deck from its own start: finished, "
+        "finite, steps (hard cases stay stable)",
+        "1 min / 20 min",
+        LINES,
+        (Run((), _files("moordyn_solvers")),),
+    ),
+    Study(
         "statics_moorpy",
         "statics_moorpy.py",
         "catenary statics (equilibrium, coupled stiffness, gradients) of the OC3 "

@@ -9,6 +9,7 @@ stacked), with the solver and controller that `solver_parts` builds for the scen
 """
 
 import dataclasses
+import functools
 
 import diffrax as dfx
 import equinox as eqx
@@ -231,7 +232,11 @@ def _padded(ts):
     )
 
 
-@jax.jit(static_argnums=1)
+# XLA's optimisations have nothing to do in a program of slices; without them it
+# compiles in about half the time
+@functools.partial(
+    jax.jit, static_argnums=1, compiler_options={"xla_backend_optimization_level": 0}
+)
 def _cut(rows, n):
     """`rows` (save-time arrays, a valid count) cut to their first `n` rows, as one
     compiled program."""
@@ -239,28 +244,32 @@ def _cut(rows, n):
     return jtu.tree_map(lambda x: x[:n], arrays), jnp.minimum(n_valid, n)
 
 
-_CUTS_SEEN: set = set()
-"""The cuts done once in this process (by their array structure and `n`): a cut
-that comes again runs compiled."""
+CUT_COMPILED_AFTER = 16
+"""A cut of the same arrays and save count done this many times on the host in a
+process (a loop of solves) runs compiled from then on."""
+
+_HOST_CUTS: dict = {}  # the cuts done on the host in this process -> how many times
 
 
 def _first_rows(traj: Trajectory, n: int) -> Trajectory:
     """`traj` cut to its first `n` save times (the padded ones dropped): `t_end` is
     the same, as the padding repeats the last time.
 
-    A cut's first time in a process goes through the host (`host_map`: no
-    compilation, but a transfer call per array back to the device); a cut of the
-    same arrays and `n` that comes again (a loop of solves) runs as one compiled
-    program (`_cut`), compiled once (docs/performance.md, "Compile time")."""
+    On the host (`host_map`: no compilation, but a transfer call per array back
+    to the device), until the same cut has come `CUT_COMPILED_AFTER` times: then
+    as one compiled program (`_cut`), whose compilation a loop of many solves
+    pays back (docs/performance.md, "Compile time"). Traced arrays (a caller's
+    jit, vmap or grad) take the program."""
     if traj.ts.shape[0] == n:
         return traj
     rows = ((traj.ts, traj.ys, traj.obs), traj.n_valid)
     leaves, treedef = jtu.tree_flatten(rows)
     key = (n, treedef, tuple((x.shape, x.dtype) for x in leaves))
-    if key in _CUTS_SEEN or not all(on_host(x) for x in leaves):
+    done = _HOST_CUTS.get(key, 0)
+    if done >= CUT_COMPILED_AFTER or not all(on_host(x) for x in leaves):
         (ts, ys, obs), n_valid = _cut(rows, n)
     else:
-        _CUTS_SEEN.add(key)
+        _HOST_CUTS[key] = done + 1
         ts, ys, obs = host_map(lambda xp, x: x[:n], rows[0])
         n_valid = host_op(lambda xp, v: xp.minimum(v, n), traj.n_valid)
     return dataclasses.replace(traj, ts=ts, ys=ys, obs=obs, n_valid=n_valid)

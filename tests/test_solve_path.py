@@ -199,3 +199,26 @@ def test_a_solve_nothing_differentiates_gives_the_same_values_from_a_smaller_tra
         rtol=0,
         atol=1e-12,
     )
+
+
+def test_a_cut_through_the_host_and_a_compiled_cut_give_the_same_trajectory(
+    monkeypatch,
+):
+    """Save times padded to the program's count are cut back on the host at
+    first and by a compiled program once the same cut has come often enough:
+    the same rows, the same valid count."""
+    import jax.tree_util as jtu
+
+    from jaxstring import _integrate
+
+    monkeypatch.setattr(_integrate, "CUT_COMPILED_AFTER", 1)
+    monkeypatch.setattr(_integrate, "_HOST_CUTS", {})
+    scene = js.string_pendulum(k=3, t1=0.2)
+    ts = np.linspace(0.0, 0.2, 5)  # padded to 8 in the program
+    host, compiled = (js.simulate(scene, "tsit5", ts=ts) for _ in range(2))
+    # one cut on the host, the second compiled
+    assert list(_integrate._HOST_CUTS.values()) == [1] and host.ts.shape == (5,)
+    assert int(host.n_valid) == int(compiled.n_valid) == 5
+    for a, b in zip(jtu.tree_leaves(host), jtu.tree_leaves(compiled), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(np.asarray(compiled.ts), ts)
