@@ -113,8 +113,8 @@ class _plain:
     """A method of `SolveConfig` read as a plain callable. Equinox returns every
     method read from a module as a bound-method module (a pytree, so that it can
     be passed to `jax.jit`), built anew at each read: several a call, a
-    measurable part of a small solve's call (docs/performance.md). These methods
-    run outside any trace."""
+    measurable part of a small solve's call (docs/performance.md). None of these
+    methods is handed to `jax.jit` as a function."""
 
     def __init__(self, fn):
         self.fn = fn
