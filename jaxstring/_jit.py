@@ -16,6 +16,17 @@ Two per-compilation options (the user's own JAX code keeps XLA's defaults), on C
 `simulate`, `fit`, `sweep` and the statics compile with them
 (`cpu_compiler_options`: those of them that this jaxlib's XLA knows, checked once
 per process on a one-operation program; XLA refuses an unknown option).
+
+Programs that a user typically runs once per structure (a static equilibrium, a
+scene's initial state, its observables, the tandem's equilibria: `cpu_jit(fun,
+tiered=True)`) compile first with ``xla_backend_optimization_level = 0`` as well
+(`QUICK_OPTIONS`): LLVM's optimisation is most of a small program's compilation,
+and such a program runs for milliseconds. Where one of them is called again and
+again (a loop over designs), its quickly compiled runs are timed, and once they
+have taken `PROMOTE_AFTER_S` in the process it is compiled again with the
+optimisation (`Tiers`): a mooring deck's static equilibrium compiled in about
+half the time and ran about three times slower (docs/performance.md, "Quick
+compilation of run-once programs").
 """
 
 import contextlib
@@ -39,22 +50,32 @@ CPU_COMPILER_OPTIONS = {
 }
 
 
+QUICK_OPTIONS = {"xla_backend_optimization_level": 0}
+"""Added to `CPU_COMPILER_OPTIONS` for the first compilation of a tiered program."""
+
+PROMOTE_AFTER_S = 2.0
+"""A tiered program is compiled again with full optimisation once its quickly
+compiled runs have taken this long in the process (about what that compilation
+costs a mid-sized program; the runs are then about three times faster)."""
+
+
 @functools.cache
-def cpu_compiler_options() -> dict:
-    """`CPU_COMPILER_OPTIONS` less any option this jaxlib's XLA does not know (a
-    newer jaxlib may drop one): each is tried once per process, compiling a
-    one-operation program on the CPU."""
+def cpu_compiler_options(quick: bool = False) -> dict:
+    """`CPU_COMPILER_OPTIONS` (with `QUICK_OPTIONS` where `quick`) less any option
+    this jaxlib's XLA does not know (a newer jaxlib may drop one): each is tried
+    once per process, compiling a one-operation program on the CPU."""
+    wanted = dict(CPU_COMPILER_OPTIONS) | (QUICK_OPTIONS if quick else {})
     cpu = jax.local_devices(backend="cpu")[0]
     lowered = jax.jit(lambda x: x + 1.0).lower(
         jax.device_put(np.zeros((), np.float64), cpu)
     )
     try:
-        lowered.compile(dict(CPU_COMPILER_OPTIONS))
-        return dict(CPU_COMPILER_OPTIONS)
+        lowered.compile(dict(wanted))
+        return wanted
     except Exception:  # noqa: BLE001  (one of them unknown: try each)
         pass
     known = {}
-    for name, value in CPU_COMPILER_OPTIONS.items():
+    for name, value in wanted.items():
         try:
             lowered.compile({name: value})
         except Exception:  # noqa: BLE001  (XLA: "No such compile option")
@@ -254,11 +275,46 @@ def cpu_only() -> bool:
     return all(d.platform == "cpu" for d in jax.devices())
 
 
-def cpu_jit(fun):
+class Tiers:
+    """Which compilation serves each argument signature of a tiered program.
+
+    A signature's first call goes to the quickly compiled program (`QUICK_OPTIONS`:
+    its compilation is in that call), and so do the next ones, each timed to its
+    result, until they have run for `PROMOTE_AFTER_S` in all; from then on its
+    calls go to the fully optimised program (compiled at the first of them)."""
+
+    def __init__(self):
+        self._spent = {}  # signature -> seconds run quickly (None: promoted)
+
+    def __call__(self, signature, quick, full, *args):
+        spent = self._spent.get(signature, -1.0)
+        if spent is None:
+            return full(*args)
+        if spent < 0.0:  # the first call: its time is mostly the compilation
+            out = quick(*args)
+            self._spent[signature] = 0.0
+            return out
+        start = time.perf_counter()
+        out = jax.block_until_ready(quick(*args))
+        spent += time.perf_counter() - start
+        self._spent[signature] = None if spent >= PROMOTE_AFTER_S else spent
+        return out
+
+    def promoted(self, signature) -> bool:
+        return signature in self._spent and self._spent[signature] is None
+
+
+def cpu_jit(fun=None, *, tiered: bool = False):
     """Like `eqx.filter_jit` (arrays traced, everything else static and hashable),
     compiled with `CPU_COMPILER_OPTIONS` when every array argument is on the CPU.
     Python functions among the static arguments are keyed by their code
-    (`_SameCode`), not by identity."""
+    (`_SameCode`), not by identity.
+
+    `tiered`: for a program typically run once per structure; on the CPU it is
+    compiled quickly first and optimised once its runs add up (`Tiers`). Usable
+    as ``@cpu_jit`` or ``@cpu_jit(tiered=True)``."""
+    if fun is None:
+        return functools.partial(cpu_jit, tiered=tiered)
 
     def call(dynamic, static):
         args, items = static.tree(dynamic)
@@ -268,15 +324,23 @@ def cpu_jit(fun):
         # keyword arguments as sorted (name, value) pairs
         return split_arrays((args, tuple(sorted(kwargs.items()))))
 
-    jitted = {False: jax.jit(call, static_argnums=1)}
+    jitted = {None: jax.jit(call, static_argnums=1)}
 
-    def cpu_jitted():
+    def cpu_jitted(quick=False):
         # made at the first call, not at import: the options are checked then
-        if True not in jitted:
-            jitted[True] = jax.jit(
-                call, static_argnums=1, compiler_options=cpu_compiler_options()
+        if quick not in jitted:
+            jitted[quick] = jax.jit(
+                call, static_argnums=1, compiler_options=cpu_compiler_options(quick)
             )
-        return jitted[True]
+        return jitted[quick]
+
+    tiers = Tiers()
+
+    def cpu_call(dynamic, static):
+        if not tiered:
+            return cpu_jitted()(dynamic, static)
+        signature = (static, tuple((x.shape, x.dtype) for x in dynamic))
+        return tiers(signature, cpu_jitted(True), cpu_jitted(), dynamic, static)
 
     name = shown_name(fun)
 
@@ -296,11 +360,12 @@ def cpu_jit(fun):
                 for d in x.devices()
             )
         )
-        jit = cpu_jitted() if on_cpu else jitted[False]
         if traced:
-            return jit(dynamic, static)
+            return jitted[None](dynamic, static)
         with compile_notice(name):
-            return jit(dynamic, static)
+            if on_cpu:
+                return cpu_call(dynamic, static)
+            return jitted[None](dynamic, static)
 
     # The CPU compilation, for inspection: `fn.lower_cpu(*args).compile().as_text()`.
     wrapper.lower_cpu = lambda *args, **kwargs: cpu_jitted().lower(*split(args, kwargs))

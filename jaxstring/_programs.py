@@ -46,6 +46,7 @@ from ._config import (
     set_program_folder as set_program_folder,
 )
 from ._jit import (
+    Tiers,
     compile_notice,
     cpu_compiler_options,
     cpu_jit,
@@ -234,11 +235,31 @@ _REFUSED = set()  # keys whose programs cannot be exported (host callbacks)
 _COMPILED = {}  # key -> its loaded program, once called (compiled) in this process
 
 
-def call(fn, *args):
+class _Tiered:
+    """A saved program compiled quickly first, optimised once its runs add up
+    (`jaxstring._jit.Tiers`; `cpu_jit`'s ``tiered``)."""
+
+    def __init__(self, exported):
+        self._exported = exported
+        self._jits = {}
+        self._tiers = Tiers()
+
+    def _jit(self, quick):
+        if quick not in self._jits:
+            self._jits[quick] = jax.jit(
+                self._exported.call, compiler_options=cpu_compiler_options(quick)
+            )
+        return self._jits[quick]
+
+    def __call__(self, *leaves):
+        return self._tiers((), self._jit(True), self._jit(False), *leaves)
+
+
+def call(fn, *args, tiered: bool = False):
     """`fn(*args)` through a saved program, where `fn` returns a pytree of arrays
     in dicts, lists and tuples; None where no program can be saved (no stable key,
     or the traced function holds host callbacks): the caller then runs `fn` its
-    usual way."""
+    usual way. `tiered`: compiled quickly first (`cpu_jit`'s ``tiered``)."""
     key, leaves = _key(fn, args)
     if key is None or key in _REFUSED:
         return None
@@ -252,19 +273,22 @@ def call(fn, *args):
             exported = _exported(fn, key, static, treedef, leaves)
             if exported is None:
                 return None
-            _LOADED[key] = jax.jit(
-                exported.call, compiler_options=cpu_compiler_options()
+            _LOADED[key] = (
+                _Tiered(exported)
+                if tiered
+                else jax.jit(exported.call, compiler_options=cpu_compiler_options())
             )
         out = _LOADED[key](*leaves)
     _COMPILED[key] = _LOADED[key]
     return out
 
 
-def call_or_jit(fn, jitted, *args):
+def call_or_jit(fn, jitted, *args, tiered: bool = False):
     """`fn(*args)` through a saved program where one can be saved (concrete CPU
     arrays, a program folder set), else `jitted(*args)` (`fn` compiled: traced
-    arguments, to differentiate, or no program folder)."""
-    out = call(fn, *args) if usable(args) else None
+    arguments, to differentiate, or no program folder). `tiered`: as `call`'s,
+    for a `jitted` made with `cpu_jit(fn, tiered=True)`."""
+    out = call(fn, *args, tiered=tiered) if usable(args) else None
     return jitted(*args) if out is None else out
 
 
@@ -329,8 +353,10 @@ def eager_jit(fun):
     process compiles every distinct operation and shape once). Python numbers
     among the arguments are structure (a new value compiles anew): pass arrays.
     Called with positional arguments and a program folder set, the traced
-    program is saved there for later processes, as `simulate`'s solves are."""
-    jitted = cpu_jit(fun)
+    program is saved there for later processes, as `simulate`'s solves are.
+    Compiled quickly first (`cpu_jit`'s ``tiered``): such calls run once per
+    structure, mostly."""
+    jitted = cpu_jit(fun, tiered=True)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
@@ -340,7 +366,7 @@ def eager_jit(fun):
         # A saved program (this module): a later process skips the trace.
         ensure_compilation_cache()
         if not kwargs and usable(args):
-            out = call(fun, *args)
+            out = call(fun, *args, tiered=True)
             if out is not None:
                 return out
         return jitted(*args, **kwargs)

@@ -2,6 +2,7 @@
 through the same `solve`, so they give the same trajectory; a solve placed on a
 named device runs there with the same result."""
 
+import pathlib
 import textwrap
 
 import jax
@@ -222,3 +223,44 @@ def test_a_cut_through_the_host_and_a_compiled_cut_give_the_same_trajectory(
     for a, b in zip(jtu.tree_leaves(host), jtu.tree_leaves(compiled), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(np.asarray(compiled.ts), ts)
+
+
+def test_a_run_once_program_compiled_quickly_then_optimised_gives_the_same_state(
+    monkeypatch, tmp_path
+):
+    """A deck's static equilibrium (a program run once per structure, mostly) is
+    compiled at XLA's optimisation level 0 first and with full optimisation once
+    its runs add up (here at once): both give the same state at rest, to
+    rounding, with the same residual force and fairlead tension."""
+    from jaxstring import _jit
+
+    used = {}  # per tiered program: which compilation served each call
+    tiers_call = _jit.Tiers.__call__
+
+    def spy(self, signature, quick, full, *args):
+        tier = "full" if self.promoted(signature) else "quick"
+        used.setdefault((id(self), signature), []).append(tier)
+        return tiers_call(self, signature, quick, full, *args)
+
+    monkeypatch.setattr(_jit.Tiers, "__call__", spy)
+    monkeypatch.setattr(_jit, "PROMOTE_AFTER_S", 0.0)
+    # MoorDyn's WD0050 chain with 23 segments: a structure no other test compiles
+    text = pathlib.Path(js.lines.case_path("WD0050_Chain.txt")).read_text()
+    deck_file = tmp_path / "chain23.txt"
+    deck_file.write_text(text.replace("410       41", "410       23"))
+    deck = js.lines.read_moordyn(deck_file)
+    quick, info_q = js.lines.equilibrium(deck.model, deck.effects, deck.env)
+    full, info_f = js.lines.equilibrium(deck.model, deck.effects, deck.env)
+    # the read's solve (compiled), one more timed (then promoted), the optimised;
+    # the same for the other run-once programs of the read and the two solves
+    assert ["quick", "quick", "full"] in used.values()
+    assert all(calls[2:] in ([], ["full"]) for calls in used.values())
+    x = np.asarray(full)[:, :3]
+    assert float(np.ptp(x[:, 0])) > 300.0 and float(x[:, 2].min()) < -49.0
+    np.testing.assert_allclose(np.asarray(quick), np.asarray(full), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(deck.y0), np.asarray(full), rtol=0, atol=1e-9)
+    for info in (info_q, info_f):
+        assert float(info["residual"]) < 1e-3  # N, of ~1e6 N tensions
+    np.testing.assert_allclose(
+        np.asarray(info_q["tension_a"]), np.asarray(info_f["tension_a"]), rtol=1e-10
+    )

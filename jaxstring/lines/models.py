@@ -1650,7 +1650,7 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
 
 # The start's geometry in one compiled call: op by op, the motion tables'
 # interpolation alone compiled some fifty one-operation programs.
-@cpu_jit
+@cpu_jit(tiered=True)
 def _start_geometry(model: LineNetwork, t0):
     """Held points' positions, rod ends and points on bodies, unstretched
     lengths at `t0`."""
@@ -1664,7 +1664,7 @@ def _start_geometry(model: LineNetwork, t0):
     return hp, ends, model.unstretched_lengths(t0)[0]
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _with_rigid_rows(model: LineNetwork, y):
     return model.initial_rigid_rows(y)
 
@@ -1786,7 +1786,7 @@ def rest_end_tensions(model, effects, env, t, x):
     return jnp.linalg.norm(fa, axis=1), jnp.linalg.norm(fb, axis=1)
 
 
-_solve_equilibrium = cpu_jit(_solve_equilibrium_body)
+_solve_equilibrium = cpu_jit(_solve_equilibrium_body, tiered=True)
 
 
 @single_blas_thread
@@ -1841,6 +1841,7 @@ def equilibrium(
         _solve_equilibrium_body,
         _solve_equilibrium,
         *(x0, model, effects, env, t0, solve_rows, max_iter, tol),
+        tiered=True,
     )
     if not isinstance(res, jax.core.Tracer):
         if not np.isfinite(float(res)) or float(res) > 1e3 * float(ftol):

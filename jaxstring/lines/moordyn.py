@@ -1080,7 +1080,7 @@ def read_moordyn(path, **options) -> Scene:
 same_signature(read_moordyn, deck_scene)
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _rest_observables(scene):
     ta, tb = rest_end_tensions(
         scene.model, scene.effects, scene.env, scene.t0, scene.y0[:, :3]

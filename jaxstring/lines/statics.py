@@ -1042,13 +1042,13 @@ def _equilibrium_core(system, loads, offsets, guess, cfg: _Cfg):
     return out, K
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _equilibrium(system, loads, offsets, guess, cfg):
     out = _equilibrium_core(system, loads, offsets, guess, cfg)[0]
     return _throw(out) if cfg.throw else out
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _stiffness(system, loads, offsets, guess, cfg):
     out, K = _equilibrium_core(system, loads, offsets, guess, cfg)
     if cfg.throw:

@@ -313,7 +313,7 @@ def _equilibrium_residual(y, scene):
     return scene.vector_field(0.0, y)
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _root(fn, y0, args, max_steps, tol):
     # module-level residuals and one jitted solve: repeated calls with the same
     # structure (N, effects) reuse the compiled solve

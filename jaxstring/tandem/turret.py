@@ -126,12 +126,12 @@ class TurretLines(AbstractVesselLoad):
                                  jnp.asarray(heading, jnp.float64))  # fmt: skip
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _restoring_forces(lines: TurretLines, P):
     return jax.vmap(lines.restoring_force)(P)
 
 
-@cpu_jit
+@cpu_jit(tiered=True)
 def _offset_for_force(lines: TurretLines, F, heading):
     e = jnp.stack([jnp.cos(heading), jnp.sin(heading)])
 
