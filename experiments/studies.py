@@ -693,10 +693,14 @@ STUDIES = (
     Study(
         "compile_options",
         "compile_options.py",
-        "XLA:CPU compile options against compile and run time of four solves",
-        "1 min / 10 min",
-        PENDULUM,
-        (Run((), _files("compile_options")),),
+        "XLA:CPU compile options against compile and run time of four solves "
+        "and of the run-once programs",
+        "1 min / 13 min",
+        (*PENDULUM, "jaxstring/lines", "jaxstring/tandem", "jaxstring/_jit.py"),
+        (
+            Run((), _files("compile_options")),
+            Run(("--run-once",), _files("compile_options_run_once")),
+        ),
     ),
     Study(
         "cpu_loops",

@@ -183,7 +183,7 @@ def _solve_batch_body(scene, q0s, rtol, atol, max_steps, method="newton"):
     return q, ok, res
 
 
-_solve_batch = cpu_jit(_solve_batch_body, tiered=True)
+_solve_batch = cpu_jit(_solve_batch_body)
 
 
 def solve_equilibria(
@@ -351,7 +351,7 @@ def _equilibria_map_body(scenes, n_grid, rtol, atol, max_steps, method):
     return eqx.filter_vmap(one)(scenes)
 
 
-_equilibria_map = cpu_jit(_equilibria_map_body, tiered=True)
+_equilibria_map = cpu_jit(_equilibria_map_body)
 
 
 def _equilibria_one_body(scene, n_grid, rtol, atol, max_steps, method):
@@ -362,7 +362,7 @@ def _equilibria_one_body(scene, n_grid, rtol, atol, max_steps, method):
     return _equilibria_batch(scene, q0s, rtol, atol, max_steps, method)
 
 
-_equilibria_one = cpu_jit(_equilibria_one_body, tiered=True)
+_equilibria_one = cpu_jit(_equilibria_one_body)
 
 
 def _collect(ys, ok, T, clr, J, taut_tension):
@@ -443,7 +443,7 @@ def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
     # a later process skips tracing the solves (`jaxstring._programs`)
     if len(scenes) == 1:
         out = _programs.call_or_jit(
-            _equilibria_one_body, _equilibria_one, scenes[0], *options, tiered=True
+            _equilibria_one_body, _equilibria_one, scenes[0], *options
         )
         return [_collect(*out, taut_tension)]
     batch = jax.tree_util.tree_map(
@@ -453,7 +453,6 @@ def _find_map(scenes, n_grid, taut_tension, rtol, atol, max_steps, method):
         _equilibria_map_body,
         _equilibria_map,
         *(batch, n_grid, rtol, atol, max_steps, method),
-        tiered=True,
     )
     rows = lambda i: (host_op(lambda xp, a: a[i], a) for a in out)
     return [_collect(*rows(i), taut_tension) for i in range(len(scenes))]
