@@ -41,7 +41,7 @@ import json, sys, time
 import jax
 import numpy as np
 import jaxstring as js
-from jaxstring import _integrate, _linalg
+from jaxstring import _integrate, _jit, _linalg
 formulation, solver, k, max_block = sys.argv[1], sys.argv[2], int(sys.argv[3]), \\
     int(sys.argv[4])
 _linalg.banded.SEQUENTIAL_MAX_BLOCK = max_block
@@ -68,7 +68,11 @@ t0 = time.perf_counter()
 compiled = lowered.compile()
 compile_s = time.perf_counter() - t0
 import equinox as eqx
-dynamic, static = eqx.partition(((scene, config, ts), ()), eqx.is_array)
+# the compiled call's array arguments, as `cpu_jit` splits them (older code:
+# `eqx.partition`)
+_split = getattr(_jit, "split_arrays", None)
+dynamic = (_split(((scene, config, ts), ()))[0] if _split else
+           eqx.partition(((scene, config, ts), ()), eqx.is_array)[0])
 runs = []
 for _ in range(5):
     t0 = time.perf_counter()

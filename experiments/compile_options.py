@@ -66,7 +66,11 @@ t0 = time.perf_counter()
 compiled = lowered.compile(_jit.cpu_compiler_options() | options)
 compile_s = time.perf_counter() - t0
 import equinox as eqx
-dynamic, static = eqx.partition(((scene, config, ts), ()), eqx.is_array)
+# the compiled call's array arguments, as `cpu_jit` splits them (older code:
+# `eqx.partition`)
+_split = getattr(_jit, "split_arrays", None)
+dynamic = (_split(((scene, config, ts), ()))[0] if _split else
+           eqx.partition(((scene, config, ts), ()), eqx.is_array)[0])
 runs = []
 for _ in range(3):
     t0 = time.perf_counter()

@@ -49,7 +49,11 @@ options = getattr(_jit, "cpu_compiler_options", lambda: _jit.CPU_COMPILER_OPTION
 t0 = time.perf_counter()
 compiled = lowered.compile(options)
 compile_s = time.perf_counter() - t0
-dynamic, _ = eqx.partition(((scene, config, ts), ()), eqx.is_array)
+# the compiled call's array arguments, as `cpu_jit` splits them (older code:
+# `eqx.partition`)
+_split = getattr(_jit, "split_arrays", None)
+dynamic = (_split(((scene, config, ts), ()))[0] if _split else
+           eqx.partition(((scene, config, ts), ()), eqx.is_array)[0])
 runs = []
 for _ in range(5):
     t0 = time.perf_counter()

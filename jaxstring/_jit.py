@@ -18,15 +18,17 @@ Two per-compilation options (the user's own JAX code keeps XLA's defaults), on C
 per process on a one-operation program; XLA refuses an unknown option).
 
 Programs that a user typically runs once per structure (a static equilibrium, a
-scene's initial state, its observables, the tandem's equilibria: `cpu_jit(fun,
-tiered=True)`) compile first with ``xla_backend_optimization_level = 0`` as well
-(`QUICK_OPTIONS`): LLVM's optimisation is most of a small program's compilation,
-and such a program runs for milliseconds. Where one of them is called again and
-again (a loop over designs), its quickly compiled runs are timed, and once they
-have taken `PROMOTE_AFTER_S` in the process it is compiled again with the
-optimisation (`Tiers`): a mooring deck's static equilibrium compiled in about
-half the time and ran about three times slower (docs/performance.md, "Quick
-compilation of run-once programs").
+scene builder's start geometry and initial state, a mooring's coupled stiffness:
+`cpu_jit(fun, tiered=True)`, `eager_jit(fun, tiered=True)`) compile first with
+``xla_backend_optimization_level = 0`` as well (`QUICK_OPTIONS`): LLVM's
+optimisation is about half of such a program's compilation, and the program runs
+for milliseconds. Where one of them is called again and again (a loop over
+designs), its quickly compiled runs are timed, and once they have taken
+`PROMOTE_AFTER_S` in the process, or it has come `PROMOTE_AFTER_CALLS` times, it
+is compiled again with the optimisation (`Tiers`). Solves, fits and sweeps are
+compiled fully from the start: at level 0 they run 4-6 times slower
+(docs/performance.md, "Run-once programs compiled quickly";
+`experiments/results/compile_options_run_once.md`).
 """
 
 import contextlib
@@ -56,7 +58,11 @@ QUICK_OPTIONS = {"xla_backend_optimization_level": 0}
 PROMOTE_AFTER_S = 2.0
 """A tiered program is compiled again with full optimisation once its quickly
 compiled runs have taken this long in the process (about what that compilation
-costs a mid-sized program; the runs are then about three times faster)."""
+costs a mid-sized program; the runs are then several times faster)..."""
+
+PROMOTE_AFTER_CALLS = 16
+"""... or once it has been called this many times (a loop of calls: however
+short each run, the optimised program serves the rest of the loop)."""
 
 
 @functools.cache
@@ -280,28 +286,33 @@ class Tiers:
 
     A signature's first call goes to the quickly compiled program (`QUICK_OPTIONS`:
     its compilation is in that call), and so do the next ones, each timed to its
-    result, until they have run for `PROMOTE_AFTER_S` in all; from then on its
-    calls go to the fully optimised program (compiled at the first of them)."""
+    result, until they have run for `PROMOTE_AFTER_S` in all or the signature has
+    come `PROMOTE_AFTER_CALLS` times; from then on its calls go to the fully
+    optimised program (compiled at the first of them)."""
 
     def __init__(self):
-        self._spent = {}  # signature -> seconds run quickly (None: promoted)
+        self._seen = {}  # signature -> (calls, seconds run quickly); None: promoted
 
     def __call__(self, signature, quick, full, *args):
-        spent = self._spent.get(signature, -1.0)
-        if spent is None:
+        seen = self._seen.get(signature, (0, 0.0))
+        if seen is None:
             return full(*args)
-        if spent < 0.0:  # the first call: its time is mostly the compilation
+        calls, spent = seen
+        if calls == 0:  # the first call: its time is mostly the compilation
             out = quick(*args)
-            self._spent[signature] = 0.0
-            return out
-        start = time.perf_counter()
-        out = jax.block_until_ready(quick(*args))
-        spent += time.perf_counter() - start
-        self._spent[signature] = None if spent >= PROMOTE_AFTER_S else spent
+        else:
+            start = time.perf_counter()
+            out = jax.block_until_ready(quick(*args))
+            spent += time.perf_counter() - start
+        calls += 1
+        promote = calls > 1 and (
+            spent >= PROMOTE_AFTER_S or calls >= PROMOTE_AFTER_CALLS
+        )
+        self._seen[signature] = None if promote else (calls, spent)
         return out
 
     def promoted(self, signature) -> bool:
-        return signature in self._spent and self._spent[signature] is None
+        return signature in self._seen and self._seen[signature] is None
 
 
 def cpu_jit(fun=None, *, tiered: bool = False):

@@ -343,7 +343,7 @@ def _load_or_export(fn, key, static, treedef, leaves):
     return exported
 
 
-def eager_jit(fun):
+def eager_jit(fun=None, *, tiered: bool = False):
     """`fun` compiled as one program (`cpu_jit`) when called on concrete arrays,
     and traced inline when called inside another trace.
 
@@ -354,9 +354,12 @@ def eager_jit(fun):
     among the arguments are structure (a new value compiles anew): pass arrays.
     Called with positional arguments and a program folder set, the traced
     program is saved there for later processes, as `simulate`'s solves are.
-    Compiled quickly first (`cpu_jit`'s ``tiered``): such calls run once per
-    structure, mostly."""
-    jitted = cpu_jit(fun, tiered=True)
+    `tiered`: compiled quickly first (`cpu_jit`'s ``tiered``), for a scene
+    builder's programs, run once per scene. Usable as ``@eager_jit`` or
+    ``@eager_jit(tiered=True)``."""
+    if fun is None:
+        return functools.partial(eager_jit, tiered=tiered)
+    jitted = cpu_jit(fun, tiered=tiered)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
@@ -366,7 +369,7 @@ def eager_jit(fun):
         # A saved program (this module): a later process skips the trace.
         ensure_compilation_cache()
         if not kwargs and usable(args):
-            out = call(fun, *args, tiered=True)
+            out = call(fun, *args, tiered=tiered)
             if out is not None:
                 return out
         return jitted(*args, **kwargs)

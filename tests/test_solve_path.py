@@ -225,13 +225,19 @@ def test_a_cut_through_the_host_and_a_compiled_cut_give_the_same_trajectory(
     np.testing.assert_array_equal(np.asarray(compiled.ts), ts)
 
 
+@pytest.mark.parametrize(
+    "after, segments", [("time", 23), ("calls", 29)], ids=["time", "calls"]
+)
 def test_a_run_once_program_compiled_quickly_then_optimised_gives_the_same_state(
-    monkeypatch, tmp_path
+    monkeypatch, tmp_path, after, segments
 ):
     """A deck's static equilibrium (a program run once per structure, mostly) is
     compiled at XLA's optimisation level 0 first and with full optimisation once
-    its runs add up (here at once): both give the same state at rest, to
-    rounding, with the same residual force and fairlead tension."""
+    its runs add up or it has come often enough (here at its second call): both
+    give the same state at rest, to rounding, with the same residual force and
+    fairlead tension."""
+    import math
+
     from jaxstring import _jit
 
     used = {}  # per tiered program: which compilation served each call
@@ -243,11 +249,15 @@ def test_a_run_once_program_compiled_quickly_then_optimised_gives_the_same_state
         return tiers_call(self, signature, quick, full, *args)
 
     monkeypatch.setattr(_jit.Tiers, "__call__", spy)
-    monkeypatch.setattr(_jit, "PROMOTE_AFTER_S", 0.0)
-    # MoorDyn's WD0050 chain with 23 segments: a structure no other test compiles
+    if after == "time":
+        monkeypatch.setattr(_jit, "PROMOTE_AFTER_S", 0.0)
+    else:
+        monkeypatch.setattr(_jit, "PROMOTE_AFTER_S", math.inf)
+        monkeypatch.setattr(_jit, "PROMOTE_AFTER_CALLS", 2)
+    # MoorDyn's WD0050 chain with fewer segments: a structure no other test compiles
     text = pathlib.Path(js.lines.case_path("WD0050_Chain.txt")).read_text()
-    deck_file = tmp_path / "chain23.txt"
-    deck_file.write_text(text.replace("410       41", "410       23"))
+    deck_file = tmp_path / "chain.txt"
+    deck_file.write_text(text.replace("410       41", f"410       {segments}"))
     deck = js.lines.read_moordyn(deck_file)
     quick, info_q = js.lines.equilibrium(deck.model, deck.effects, deck.env)
     full, info_f = js.lines.equilibrium(deck.model, deck.effects, deck.env)

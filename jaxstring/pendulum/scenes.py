@@ -111,6 +111,6 @@ def string_pendulum(
     )
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _initial_state(model, theta0):
     return model.initial_state(theta0)

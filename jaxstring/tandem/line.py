@@ -343,7 +343,7 @@ def static_line(model: TandemLine, yv, effects, env, sag_guess=None, max_steps=1
     return jnp.concatenate([p, jnp.zeros_like(p)], axis=1)
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _static_shape(model, yv, line_eff, env, sag, max_steps):
     """Newton on the still line's node forces from a parabolic guess of depth
     `sag` between the fairleads: (node positions, max |residual|)."""
@@ -358,7 +358,7 @@ def _static_shape(model, yv, line_eff, env, sag, max_steps):
     return _root(_static_residual, p0, args, max_steps, 1e-12)
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _sag_guess(model, hawser, yv, env):
     """The parabola's sag w l0^2 / (8 T) of the line at the massless hawser's
     tension at `yv` (at least 1 kN)."""

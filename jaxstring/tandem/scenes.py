@@ -119,7 +119,7 @@ def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     return _aligned_equilibrium(model, effects, env, f64(F_ast), f64(heading))
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _aligned_equilibrium(model, effects, env, F_ast, heading):
     hawsers = [e for e in effects if isinstance(e, Hawser)]
     moorings = [e for e in effects if isinstance(e, (TurretMooring, TurretLines))]
@@ -192,7 +192,7 @@ def _perturb_shuttle_heading(model, y, angle):
     return _turn_shuttle(model, y, jnp.asarray(angle, jnp.float64))
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _turn_shuttle(model, y, angle):
     psi = y[8]
     P2 = y[6:8] + model.x_h2 * jnp.stack([jnp.cos(psi), jnp.sin(psi)])

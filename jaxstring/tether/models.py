@@ -735,7 +735,7 @@ TETHER_METHODS = {
 # Initial shapes (construction time, NumPy; not traced)
 
 
-@eager_jit
+@eager_jit(tiered=True)
 def _mounts(model, t0):
     """Target link lengths and the mount positions at `t0`, in one compiled call."""
     root = model.root.kinematics(t0).position
