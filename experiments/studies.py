@@ -752,7 +752,7 @@ STUDIES = (
         ),
         (
             Run((), _files("first_result")),
-            Run(("--ref", "b094d35", "--rounds", "2"), _files("first_result_ref")),
+            Run(("--ref", "89d19c7", "--rounds", "2"), _files("first_result_ref")),
         ),
     ),
     Study(

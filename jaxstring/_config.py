@@ -96,7 +96,7 @@ def program_folder() -> str | None:
 
 def enable_compilation_cache(
     path: str | None = None,
-    min_compile_s: float = 0.1,
+    min_compile_s: float = 0.05,
     programs: bool = True,
 ):
     """Turn on JAX's persistent compilation cache: compiled programs that took at
