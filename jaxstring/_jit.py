@@ -288,15 +288,27 @@ class Tiers:
     its compilation is in that call), and so do the next ones, each timed to its
     result, until they have run for `PROMOTE_AFTER_S` in all or the signature has
     come `PROMOTE_AFTER_CALLS` times; from then on its calls go to the fully
-    optimised program (compiled at the first of them)."""
+    optimised program, compiled at the first of them (under a compile notice
+    naming `name`, unless None: the caller's own notice covers the call)."""
 
-    def __init__(self):
+    _PROMOTING = "promoting"  # the next call compiles the optimised program
+
+    def __init__(self, name: str | None = None):
+        self._name = name
         self._seen = {}  # signature -> (calls, seconds run quickly); None: promoted
 
     def __call__(self, signature, quick, full, *args):
         seen = self._seen.get(signature, (0, 0.0))
         if seen is None:
             return full(*args)
+        if seen is self._PROMOTING:
+            if self._name is None:
+                out = full(*args)
+            else:
+                with compile_notice(self._name):
+                    out = full(*args)
+            self._seen[signature] = None
+            return out
         calls, spent = seen
         if calls == 0:  # the first call: its time is mostly the compilation
             out = quick(*args)
@@ -308,11 +320,12 @@ class Tiers:
         promote = calls > 1 and (
             spent >= PROMOTE_AFTER_S or calls >= PROMOTE_AFTER_CALLS
         )
-        self._seen[signature] = None if promote else (calls, spent)
+        self._seen[signature] = self._PROMOTING if promote else (calls, spent)
         return out
 
     def promoted(self, signature) -> bool:
-        return signature in self._seen and self._seen[signature] is None
+        """Whether the signature's calls go to the optimised program now."""
+        return signature in self._seen and not isinstance(self._seen[signature], tuple)
 
 
 def cpu_jit(fun=None, *, tiered: bool = False):
@@ -345,15 +358,14 @@ def cpu_jit(fun=None, *, tiered: bool = False):
             )
         return jitted[quick]
 
-    tiers = Tiers()
+    name = shown_name(fun)
+    tiers = Tiers()  # (every CPU call runs under the wrapper's compile notice)
 
     def cpu_call(dynamic, static):
         if not tiered:
             return cpu_jitted()(dynamic, static)
         signature = (static, tuple((x.shape, x.dtype) for x in dynamic))
         return tiers(signature, cpu_jitted(True), cpu_jitted(), dynamic, static)
-
-    name = shown_name(fun)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):

@@ -239,10 +239,10 @@ class _Tiered:
     """A saved program compiled quickly first, optimised once its runs add up
     (`jaxstring._jit.Tiers`; `cpu_jit`'s ``tiered``)."""
 
-    def __init__(self, exported):
+    def __init__(self, exported, name):
         self._exported = exported
         self._jits = {}
-        self._tiers = Tiers()
+        self._tiers = Tiers(name)
 
     def _jit(self, quick):
         if quick not in self._jits:
@@ -274,7 +274,7 @@ def call(fn, *args, tiered: bool = False):
             if exported is None:
                 return None
             _LOADED[key] = (
-                _Tiered(exported)
+                _Tiered(exported, shown_name(fn))
                 if tiered
                 else jax.jit(exported.call, compiler_options=cpu_compiler_options())
             )
