@@ -9,7 +9,6 @@ stacked), with the solver and controller that `solver_parts` builds for the scen
 """
 
 import dataclasses
-import functools
 
 import diffrax as dfx
 import equinox as eqx
@@ -232,16 +231,18 @@ def _padded(ts):
     )
 
 
-# XLA's optimisations have nothing to do in a program of slices; without them it
-# compiles in about half the time
-@functools.partial(
-    jax.jit, static_argnums=1, compiler_options={"xla_backend_optimization_level": 0}
-)
-def _cut(rows, n):
-    """`rows` (save-time arrays, a valid count) cut to their first `n` rows, as one
-    compiled program."""
+def _cut_rows(rows, n):
+    """`rows` (save-time arrays, a valid count) cut to their first `n` rows."""
     arrays, n_valid = rows
     return jtu.tree_map(lambda x: x[:n], arrays), jnp.minimum(n_valid, n)
+
+
+# The cut as one compiled program, for concrete arrays (a nested jit takes no
+# compiler options). XLA's optimisations have nothing to do in a program of
+# slices; without them it compiles in about half the time.
+_cut = jax.jit(
+    _cut_rows, static_argnums=1, compiler_options={"xla_backend_optimization_level": 0}
+)
 
 
 CUT_COMPILED_AFTER = 16
@@ -259,11 +260,15 @@ def _first_rows(traj: Trajectory, n: int) -> Trajectory:
     to the device), until the same cut has come `CUT_COMPILED_AFTER` times: then
     as one compiled program (`_cut`), whose compilation a loop of many solves
     pays back (docs/performance.md, "Compile time"). Traced arrays (a caller's
-    jit, vmap or grad) take the program."""
+    jit, vmap or grad) are sliced in the caller's trace, arrays on another
+    device by the compiled program."""
     if traj.ts.shape[0] == n:
         return traj
     rows = ((traj.ts, traj.ys, traj.obs), traj.n_valid)
     leaves, treedef = jtu.tree_flatten(rows)
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        (ts, ys, obs), n_valid = _cut_rows(rows, n)
+        return dataclasses.replace(traj, ts=ts, ys=ys, obs=obs, n_valid=n_valid)
     key = (n, treedef, tuple((x.shape, x.dtype) for x in leaves))
     done = _HOST_CUTS.get(key, 0)
     if done >= CUT_COMPILED_AFTER or not all(on_host(x) for x in leaves):
