@@ -240,19 +240,14 @@ class _Tiered:
     (`jaxstring._jit.Tiers`; `cpu_jit`'s ``tiered``)."""
 
     def __init__(self, exported, name):
-        self._exported = exported
-        self._jits = {}
+        self._quick, self._full = (
+            jax.jit(exported.call, compiler_options=cpu_compiler_options(quick))
+            for quick in (True, False)
+        )
         self._tiers = Tiers(name)
 
-    def _jit(self, quick):
-        if quick not in self._jits:
-            self._jits[quick] = jax.jit(
-                self._exported.call, compiler_options=cpu_compiler_options(quick)
-            )
-        return self._jits[quick]
-
     def __call__(self, *leaves):
-        return self._tiers((), self._jit(True), self._jit(False), *leaves)
+        return self._tiers((), self._quick, self._full, *leaves)
 
 
 def call(fn, *args, tiered: bool = False):
