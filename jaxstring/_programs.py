@@ -5,8 +5,12 @@ compilation of a solve, but every new process still traces the solve in Python,
 which costs more than the run itself for a small scene (measured:
 docs/performance.md, "Compile time").
 With a program folder set, `simulate` exports the traced solve once
-(`jax.export`) and later processes load it and run it without tracing; the
-program's compilation comes from the compilation cache as before.
+(`jax.export`) and saves its compilation beside it (XLA's executable, keyed as
+well by this machine: its processor, XLA's version and flags); a later process
+on the same machine loads the executable and runs it, neither tracing nor
+lowering nor compiling. Where only the traced program fits (another machine, a
+tiered program's other compilation) it is lowered and compiled from the saved
+trace, its compilation read from JAX's compilation cache where it is there.
 
 A saved program is keyed by everything that decides the traced program: the
 function's module and name (a function whose result depends on its arguments
@@ -21,10 +25,12 @@ with host callbacks (a progress meter; an equinox runtime check, which jaxstring
 default solves do not hold). A program that cannot be read back is traced again
 and rewritten.
 
-The program is stored with `pickle` (jax's own serialisation needs the optional
-`flatbuffers` package): the exported function's private `_get_vjp` field, which
-cannot be pickled and is only needed to differentiate the loaded program, is
-dropped, so loaded programs serve forward solves only.
+The program and the executable are stored with `pickle` (jax's own
+serialisation of a program needs the optional `flatbuffers` package): the
+exported function's private `_get_vjp` field, which cannot be pickled and is
+only needed to differentiate the loaded program, is dropped, so loaded programs
+serve forward solves only. An executable is machine code: like the rest of the
+folder, read only what this user's own processes wrote.
 """
 
 import dataclasses
@@ -33,12 +39,16 @@ import hashlib
 import os
 import pathlib
 import pickle
+import platform
 import sys
+import threading
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
+import numpy as np
+from jax.experimental import serialize_executable
 
 from ._config import (
     ensure_compilation_cache,
@@ -230,24 +240,196 @@ def usable(args) -> bool:
     return True
 
 
-_LOADED = {}  # key -> the compiled call of a saved program, in this process
+_LOADED = {}  # key -> the `_Program` of a saved program, in this process
 _REFUSED = set()  # keys whose programs cannot be exported (host callbacks)
 _COMPILED = {}  # key -> its loaded program, once called (compiled) in this process
 
 
-class _Tiered:
-    """A saved program compiled quickly first, optimised once its runs add up
-    (`jaxstring._jit.Tiers`; `cpu_jit`'s ``tiered``)."""
+class _Refused(Exception):
+    """The program cannot be exported (host callbacks)."""
 
-    def __init__(self, exported, name):
-        self._quick, self._full = (
-            jax.jit(exported.call, compiler_options=cpu_compiler_options(quick))
-            for quick in (True, False)
+
+class _Program:
+    """A saved program's compilations in this process: each (the optimised one;
+    for a tiered program the quick one first, `jaxstring._jit.Tiers`) read from
+    the program folder where a process on this machine saved it
+    (`_read_executable`), else lowered and compiled from the traced program
+    (read or traced: `_exported`) and saved there for the next process."""
+
+    def __init__(self, fn, key, static, treedef, tiered, name):
+        self._fn, self._key, self._static, self._treedef = fn, key, static, treedef
+        self._compilations = {}  # quick -> jax.stages.Compiled
+        self._jits = {}  # quick -> `jax.jit` of the traced program
+        self._read = {}  # quick -> whether its executable was read from the folder
+        self._exported = None
+        # A tiered program that an earlier process optimised starts optimised.
+        self._tiers = (
+            Tiers(name)
+            if tiered and not _executable_path(key, False).exists()
+            else None
         )
-        self._tiers = Tiers(name)
+
+    def _jitted(self, quick, leaves):
+        """The traced program (read, or traced and saved), compiled by `jax.jit`."""
+        if quick not in self._jits:
+            if self._exported is None:
+                self._exported = _exported(
+                    self._fn, self._key, self._static, self._treedef, leaves
+                )
+                if self._exported is None:
+                    raise _Refused
+            self._jits[quick] = jax.jit(
+                self._exported.call, compiler_options=cpu_compiler_options(quick)
+            )
+        return self._jits[quick]
+
+    def _compiled(self, quick, leaves):
+        """The executable: read, or compiled and saved."""
+        compiled = self._compilations.get(quick)
+        if compiled is None:
+            compiled = _read_executable(self._key, quick)
+            self._read[quick] = compiled is not None
+            if compiled is None:
+                lowered = self._jitted(quick, leaves).lower(*leaves)
+                hits = _cache_hits()
+                compiled = lowered.compile()
+                if _cache_hits() == hits:  # compiled here, not read from JAX's cache
+                    lapack = b"lapack_" in self._exported.mlir_module_serialized
+                    _write_executable(self._key, quick, compiled, lapack)
+            self._compilations[quick] = compiled
+        return compiled
+
+    def run(self, quick, *leaves):
+        # An executable runs on the first CPU device (the default one); arrays
+        # placed on another go through `jax.jit`, which follows them.
+        if not _on_first_device(leaves):
+            return self._jitted(quick, leaves)(*leaves)
+        fresh = quick not in self._compilations
+        compiled = self._compiled(quick, leaves)
+        if not (fresh and self._read.get(quick)):
+            return compiled(*leaves)
+        try:  # the first run of a read executable, to its end
+            return jax.block_until_ready(compiled(*leaves))
+        except jax.errors.JaxRuntimeError:  # it does not run here: compile anew
+            _executable_path(self._key, quick).unlink(missing_ok=True)
+            del self._compilations[quick]
+            return self._compiled(quick, leaves)(*leaves)
 
     def __call__(self, *leaves):
-        return self._tiers((), self._quick, self._full, *leaves)
+        if self._tiers is None:
+            return self.run(False, *leaves)
+        return self._tiers(
+            (),
+            functools.partial(self.run, True),
+            functools.partial(self.run, False),
+            *leaves,
+        )
+
+
+def _on_first_device(leaves) -> bool:
+    first = jax.devices("cpu")[0]
+    return all(not isinstance(x, jax.Array) or x.devices() == {first} for x in leaves)
+
+
+_HITS = threading.local()
+
+
+def _count_hit(event: str, **kwargs) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _HITS.count = getattr(_HITS, "count", 0) + 1
+
+
+@functools.cache
+def _listening() -> None:
+    jax.monitoring.register_event_listener(_count_hit)
+
+
+def _cache_hits() -> int:
+    """How many compilations this thread has read from JAX's compilation cache.
+    An executable read from there is not saved again: XLA:CPU serialises such an
+    executable incompletely (a later process that loads it fails to find its
+    kernels), so only an executable compiled in this process is saved."""
+    _listening()
+    return getattr(_HITS, "count", 0)
+
+
+@functools.cache
+def _machine() -> str:
+    """What an executable compiled here is keyed by besides its program: XLA's
+    CPU client (its version), the CPU devices, the XLA flags, the processor (its
+    model and instruction-set flags: XLA:CPU compiles for the host's)."""
+    cpu = jax.devices("cpu")
+    h = hashlib.sha256()
+    for part in (
+        cpu[0].client.platform_version,
+        str(len(cpu)),
+        os.environ.get("XLA_FLAGS", ""),
+        platform.machine(),
+        platform.processor(),
+        _processor(),
+    ):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def _processor() -> str:
+    """The first processor's vendor, model and flags (Linux's /proc/cpuinfo;
+    empty elsewhere)."""
+    try:
+        text = pathlib.Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return ""
+    first = text.split("\n\n")[0].splitlines()
+    wanted = ("vendor_id", "model name", "flags", "Features", "CPU part")
+    return "\n".join(line for line in first if line.startswith(wanted))
+
+
+def _executable_path(key, quick) -> pathlib.Path:
+    tier = "quick" if quick else "full"
+    return pathlib.Path(program_folder()) / f"{key}.{_machine()}.{tier}.executable"
+
+
+def _read_executable(key, quick):
+    """The compilation of `key` saved by a process on this machine, loaded; None
+    where there is none or it cannot be loaded (then compiled again)."""
+    path = _executable_path(key, quick)
+    try:
+        payload, in_tree, out_tree, lapack = pickle.loads(path.read_bytes())
+        if lapack:
+            _lapack_ready()
+        return serialize_executable.deserialize_and_load(
+            payload,
+            in_tree,
+            out_tree,
+            backend="cpu",
+            execution_devices=jax.devices("cpu")[:1],
+        )
+    except Exception:  # noqa: BLE001  (none, unreadable, another version's)
+        return None
+
+
+@functools.cache
+def _lapack_ready() -> None:
+    """jaxlib's LAPACK kernels (LU, triangular solves) find their routines (in
+    scipy) when JAX first lowers one of them; a loaded executable is not
+    lowered, and its first LAPACK call would jump to a null routine. Called
+    before loading an executable that calls LAPACK."""
+    from jaxlib import lapack
+
+    lapack.prepare_lapack_call("getrf_ffi", np.dtype(np.float64))
+
+
+def _write_executable(key, quick, compiled, lapack: bool) -> None:
+    """Save `compiled`, with whether it calls LAPACK (`_lapack_ready`)."""
+    path = _executable_path(key, quick)
+    try:
+        data = pickle.dumps((*serialize_executable.serialize(compiled), lapack))
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except Exception:  # noqa: BLE001  (not saved: the next process compiles it)
+        pass
 
 
 def call(fn, *args, tiered: bool = False):
@@ -265,15 +447,12 @@ def call(fn, *args, tiered: bool = False):
         if key not in _LOADED:
             dynamic, static = eqx.partition(args, eqx.is_array)
             treedef = jtu.tree_structure(dynamic)
-            exported = _exported(fn, key, static, treedef, leaves)
-            if exported is None:
-                return None
-            _LOADED[key] = (
-                _Tiered(exported, shown_name(fn))
-                if tiered
-                else jax.jit(exported.call, compiler_options=cpu_compiler_options())
-            )
-        out = _LOADED[key](*leaves)
+            _LOADED[key] = _Program(fn, key, static, treedef, tiered, shown_name(fn))
+        try:
+            out = _LOADED[key](*leaves)
+        except _Refused:
+            del _LOADED[key]
+            return None
     _COMPILED[key] = _LOADED[key]
     return out
 

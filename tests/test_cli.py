@@ -229,6 +229,109 @@ def test_saved_programs_of_two_functions_with_the_same_arguments_are_two(tmp_pat
     assert jnp.array_equal(two["y"], 2.0 * x) and jnp.array_equal(three["y"], 3.0 * x)
 
 
+_SOLVE_MODULE = """
+import jax.numpy as jnp
+
+TRACES = []
+
+
+def solve(a, b):
+    TRACES.append(1)
+    return {"x": jnp.linalg.solve(a, b), "det": jnp.linalg.det(a)}
+"""
+
+_SOLVE_DRIVER = """
+import json, sys
+import numpy as np
+import jax.numpy as jnp
+import jaxstring
+from jaxstring import _programs
+import solve_module
+
+folder, mode = sys.argv[1], sys.argv[2]
+_programs.set_program_folder(folder)
+if mode == "executable only":
+    def refuse(*args):
+        raise AssertionError("the traced program was read")
+    _programs._exported = refuse
+a = np.array([[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
+b = np.array([1.0, 2.0, 3.0])
+out = _programs.call(solve_module.solve, jnp.asarray(a), jnp.asarray(b))
+print(json.dumps({"x": np.asarray(out["x"]).tolist(), "det": float(out["det"]),
+                  "traces": len(solve_module.TRACES)}))
+"""
+
+
+def _run_solve_driver(tmp_path, folder, mode, jax_cache=None):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "solve_module.py").write_text(_SOLVE_MODULE)
+    (tmp_path / "driver.py").write_text(_SOLVE_DRIVER)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    env["PYTHONPATH"] = str(tmp_path)
+    if jax_cache is not None:
+        env["JAX_COMPILATION_CACHE_DIR"] = str(jax_cache)
+        env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+        env["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "0"
+    run = subprocess.run(
+        [sys.executable, str(tmp_path / "driver.py"), str(folder), mode],
+        env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.splitlines()[-1])
+
+
+def test_a_later_process_runs_the_saved_executable_without_the_traced_program(
+    tmp_path,
+):
+    # The first process traces, compiles and saves the program and its
+    # executable; a fresh process (no JAX compilation cache) runs the executable
+    # without reading the traced program. The program solves with LAPACK's LU,
+    # which a process that has lowered nothing must make ready before the run
+    # (it crashed on a null routine without it).
+    folder = tmp_path / "programs"
+    folder.mkdir()
+    first = _run_solve_driver(tmp_path, folder, "trace")
+    assert first["traces"] == 1
+    assert len(list(folder.glob("*.program"))) == 1
+    assert len(list(folder.glob("*.full.executable"))) == 1
+    second = _run_solve_driver(tmp_path, folder, "executable only")
+    a = np.array([[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
+    b = np.array([1.0, 2.0, 3.0])
+    assert second["traces"] == 0
+    np.testing.assert_allclose(second["x"], np.linalg.solve(a, b), rtol=1e-14)
+    np.testing.assert_allclose(second["det"], np.linalg.det(a), rtol=1e-14)
+    assert second == first | {"traces": 0}
+    # An executable that cannot be read is compiled again from the traced
+    # program and rewritten.
+    (executable,) = folder.glob("*.full.executable")
+    executable.write_bytes(b"not an executable")
+    third = _run_solve_driver(tmp_path, folder, "trace")
+    assert third == second
+    assert executable.stat().st_size > 1000
+
+
+def test_an_executable_read_from_jaxs_cache_is_not_saved(tmp_path):
+    # XLA:CPU serialises an executable loaded from JAX's compilation cache
+    # incompletely: a program compiled by reading that cache (here: the same
+    # program saved into a second, empty folder) keeps its traced program only,
+    # and a third process runs it from there.
+    cache, one, two = (tmp_path / name for name in ("cache", "one", "two"))
+    for folder in (cache, one, two):
+        folder.mkdir()
+    first = _run_solve_driver(tmp_path, one, "trace", jax_cache=cache)
+    assert len(list(one.glob("*.full.executable"))) == 1
+    second = _run_solve_driver(tmp_path, two, "trace", jax_cache=cache)
+    assert len(list(two.glob("*.program"))) == 1
+    assert not list(two.glob("*.executable"))
+    third = _run_solve_driver(tmp_path, two, "trace", jax_cache=cache)
+    assert third["traces"] == 0
+    assert second["x"] == first["x"] == third["x"]
+
+
 def test_eager_calls_are_saved_programs_that_a_later_process_reads(tmp_path):
     # A scene builder's compiled call (`eager_jit`: here the string's initial
     # state) is saved with the program folder set; after JAX's in-memory caches are
