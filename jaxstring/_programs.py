@@ -279,7 +279,8 @@ class _Program:
                 if self._exported is None:
                     raise _Refused
             self._jits[quick] = jax.jit(
-                self._exported.call, compiler_options=cpu_compiler_options(quick)
+                _named_call(self._exported, self._key, quick),
+                compiler_options=cpu_compiler_options(quick),
             )
         return self._jits[quick]
 
@@ -324,6 +325,20 @@ class _Program:
             functools.partial(self.run, False),
             *leaves,
         )
+
+
+def _named_call(exported, key, quick):
+    """`exported.call` named after the program's key and tier. The name is the
+    compiled module's, part of its key in JAX's compilation cache: a program
+    changed in name only (a new jaxstring source, the same operations) is then
+    compiled, not read from there, and its executable saved (`_cache_hits`)."""
+
+    def call(*leaves):
+        return exported.call(*leaves)
+
+    tier = "quick" if quick else "full"
+    call.__name__ = call.__qualname__ = f"saved_{key[:16]}_{tier}"
+    return call
 
 
 def _on_first_device(leaves) -> bool:

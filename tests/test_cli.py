@@ -48,8 +48,8 @@ def test_unknown_scene_lists_valid(capsys):
 
 def test_command_caches_the_compiled_solve(tmp_path):
     # The `jaxstring` command runs with EQX_ON_ERROR=nan, so its solve has no host
-    # callbacks and JAX writes it to the persistent cache; a second process reads
-    # it back instead of compiling.
+    # callbacks: its traced program and its executable are saved in the cache
+    # folder, and a second process runs the executable instead of compiling.
     import os
     import subprocess
     import sys
@@ -69,16 +69,19 @@ def test_command_caches_the_compiled_solve(tmp_path):
     }
     env["JAXSTRING_CACHE_DIR"] = str(cache)
     cmd = [exe, *FAST, "--out", str(tmp_path / "out")]
+
+    def files():
+        return sorted(str(f.relative_to(cache)) for f in cache.rglob("*"))
+
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    solves = sorted(f for f in os.listdir(cache) if f.startswith("jit_call"))
-    assert solves, sorted(os.listdir(cache))
+    saved = files()
+    assert [f for f in saved if f.endswith(".program")]
+    assert [f for f in saved if f.endswith(".full.executable")]
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0, second.stderr
-    # Nothing new to compile: the same entries, and the same result.
-    assert sorted(f for f in os.listdir(cache) if f.startswith("jit_call")) == solves
-    # ... and the traced solve was saved, so the second process did not trace it.
-    assert [f for f in os.listdir(cache / "programs") if f.endswith(".program")]
+    # Nothing new traced or compiled (no new cache entries), the same result.
+    assert files() == saved
     end = [ln for ln in first.stdout.splitlines() if ln.startswith("end mass")]
     assert end and end == [
         ln for ln in second.stdout.splitlines() if ln.startswith("end mass")

@@ -31,8 +31,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._arrays import f64
 from .._environment import Environment
-from .._jit import cpu_jit
+from .._programs import eager_jit
 from .._scene import Scene
 from .._validate import options_of, same_signature
 from ..chain import Buoyancy, Drag, FixedEnd, Gravity, PrescribedEnd
@@ -938,13 +939,13 @@ def deck_scene(
     def end(e):
         return RodEnd(e[0] - 1, e[1]) if isinstance(e, tuple) else index[e]
 
-    col = lambda key: jnp.asarray([deck.types[ln["type"]][key] for ln in deck.lines])
+    col = lambda key: f64([deck.types[ln["type"]][key] for ln in deck.lines])
     EI = col("EI")
     model = LineNetwork(
         points=tuple(points),
         attach=tuple((end(ln["a"]), end(ln["b"])) for ln in deck.lines),
         segments=tuple(ln["segments"] for ln in deck.lines),
-        L=jnp.asarray([ln["L"] for ln in deck.lines]),
+        L=f64([ln["L"] for ln in deck.lines]),
         d=col("d"),
         w=col("w"),
         EA=col("EA"),
@@ -1080,7 +1081,7 @@ def read_moordyn(path, **options) -> Scene:
 same_signature(read_moordyn, deck_scene)
 
 
-@cpu_jit(tiered=True)
+@eager_jit(tiered=True)
 def _rest_observables(scene):
     ta, tb = rest_end_tensions(
         scene.model, scene.effects, scene.env, scene.t0, scene.y0[:, :3]

@@ -71,7 +71,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import BoolScalar, FloatScalar, IntScalar, f64, param as _param
-from .._jit import cpu_jit
+from .._programs import eager_jit
 from .._validate import (
     check_choice,
     check_int,
@@ -1042,13 +1042,13 @@ def _equilibrium_core(system, loads, offsets, guess, cfg: _Cfg):
     return out, K
 
 
-@cpu_jit(tiered=True)
+@eager_jit(tiered=True)
 def _equilibrium(system, loads, offsets, guess, cfg):
     out = _equilibrium_core(system, loads, offsets, guess, cfg)[0]
     return _throw(out) if cfg.throw else out
 
 
-@cpu_jit(tiered=True)
+@eager_jit(tiered=True)
 def _stiffness(system, loads, offsets, guess, cfg):
     out, K = _equilibrium_core(system, loads, offsets, guess, cfg)
     if cfg.throw:
