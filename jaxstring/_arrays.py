@@ -16,8 +16,30 @@ IntScalar = Int[Array, ""]
 
 
 def f64(x):
-    """`x` as a float64 array."""
-    return jnp.asarray(x, dtype=jnp.float64)
+    """`x` as a float64 array. A concrete value on the host is converted by NumPy
+    and moved in one `device_put` (`jnp.asarray` compiles a small conversion
+    program for each shape, tens of milliseconds in every new process)."""
+    return as_array(x, np.float64)
+
+
+def as_array(x, dtype=None):
+    """`jnp.asarray(x, dtype)`, with concrete host values (numbers, lists, NumPy
+    arrays, JAX arrays on the CPU) converted by NumPy and moved in one
+    `device_put`: no conversion program compiled (`f64`)."""
+    if (
+        isinstance(x, jax.Array)
+        and (dtype is None or x.dtype == dtype)
+        and not x.weak_type
+    ):
+        return x
+    if not isinstance(x, jax.core.Tracer) and on_host(x):
+        try:
+            value = np.asarray(x, dtype=dtype)
+        except (TypeError, ValueError):  # not numbers: JAX's own error
+            return jnp.asarray(x, dtype=dtype)
+        if value.dtype.kind in "biufc":
+            return jax.device_put(value)
+    return jnp.asarray(x, dtype=dtype)
 
 
 def param(**kw):

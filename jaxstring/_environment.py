@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._arrays import FloatScalar
+from ._arrays import FloatScalar, f64
 from ._validate import (
     check_fields,
     check_finite,
@@ -25,10 +25,6 @@ from ._validate import (
 # spec): the defaults of `Environment` and of every scene that takes them.
 G = 9.81
 RHO_SEA_WATER = 1025.0
-
-
-def _f64(x):
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 class AbstractFlow(eqx.Module):
@@ -53,7 +49,7 @@ class UniformCurrent(AbstractFlow):
     - `velocity`: shape `(3,)`, m/s.
     """
 
-    velocity: Float[Array, "3"] = eqx.field(converter=_f64)
+    velocity: Float[Array, "3"] = eqx.field(converter=f64)
 
     def __check_init__(self):
         if jnp.shape(self.velocity) != (3,):
@@ -80,8 +76,8 @@ class DepthProfileCurrent(AbstractFlow):
     - `velocity`: water velocity at the stations, shape `(K, 3)`, m/s.
     """
 
-    z: Float[Array, " K"] = eqx.field(converter=_f64)
-    velocity: Float[Array, "K 3"] = eqx.field(converter=_f64)
+    z: Float[Array, " K"] = eqx.field(converter=f64)
+    velocity: Float[Array, "K 3"] = eqx.field(converter=f64)
 
     def __check_init__(self):
         if jnp.ndim(self.z) != 1 or jnp.shape(self.z)[0] < 1:
@@ -148,10 +144,10 @@ class Environment(eqx.Module):
     - `wind`: the air velocity field at the surface, or None for no wind.
     """
 
-    g: FloatScalar = eqx.field(converter=_f64, default=G)
-    rho_water: FloatScalar = eqx.field(converter=_f64, default=RHO_SEA_WATER)
-    rho_air: FloatScalar = eqx.field(converter=_f64, default=1.225)
-    nu_water: FloatScalar = eqx.field(converter=_f64, default=1.0e-6)
+    g: FloatScalar = eqx.field(converter=f64, default=G)
+    rho_water: FloatScalar = eqx.field(converter=f64, default=RHO_SEA_WATER)
+    rho_air: FloatScalar = eqx.field(converter=f64, default=1.225)
+    nu_water: FloatScalar = eqx.field(converter=f64, default=1.0e-6)
     current: AbstractFlow | None = None
     wind: AbstractFlow | None = None
 

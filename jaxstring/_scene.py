@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._arrays import FloatScalar
+from ._arrays import FloatScalar, as_array
 from ._effect import AbstractEffect
 from ._environment import Environment
 from ._model import AbstractModel
@@ -20,15 +20,15 @@ def _state(y0):
     # Lists and integer arrays become float arrays; anything that is not numbers is
     # left for `__check_init__` to refuse by name.
     try:
-        y = jnp.asarray(y0)
+        y = as_array(y0)
     except TypeError:
         return y0
-    return y if jnp.issubdtype(y.dtype, jnp.inexact) else y.astype(jnp.float64)
+    return y if jnp.issubdtype(y.dtype, jnp.inexact) else as_array(y, np.float64)
 
 
 def _time(t):
     try:
-        return jnp.asarray(t)
+        return as_array(t)
     except TypeError:
         return t
 

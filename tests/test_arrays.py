@@ -71,3 +71,51 @@ def test_a_networks_vector_field_sums_rows_without_a_scatter():
         found = _primitives(jaxpr.jaxpr, set())
         assert "gather" in found, deck
         assert not found & {"scatter", "scatter-add", "scatter_add"}, deck
+
+
+def _compilations(fn):
+    """(fn(), how many programs JAX compiled while it ran)."""
+    seen = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            seen.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        out = fn()
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    return out, len(seen)
+
+
+@pytest.mark.parametrize(
+    "value",
+    [0.3, 7, [1.0, 2.5, -3.0], np.arange(4), np.float32(1.5),
+     np.ones((2, 3), np.float32), True],
+)  # fmt: skip
+def test_host_values_become_float64_arrays_without_compiling(value):
+    # `f64` (every parameter field's converter) and `as_array` convert host values
+    # with NumPy and move them in one transfer: the same values as
+    # `jnp.asarray(..., float64)`, and no conversion program compiled.
+    out, compiled = _compilations(lambda: _arrays.f64(value))
+    assert compiled == 0
+    assert isinstance(out, jax.Array) and out.dtype == jnp.float64
+    np.testing.assert_array_equal(out, np.asarray(value, np.float64))
+    kept, compiled = _compilations(lambda: _arrays.as_array(value))
+    assert compiled == 0
+    np.testing.assert_array_equal(kept, np.asarray(value))
+    assert kept.dtype == jnp.asarray(value).dtype
+
+
+def test_float64_arrays_and_tracers_pass_through():
+    x = jnp.linspace(0.0, 1.0, 5)
+    assert _arrays.f64(x) is x
+    # inside a trace the conversion is JAX's own
+    y = jax.jit(lambda v: _arrays.f64(v.astype(jnp.float32)) * 2.0)(x)
+    np.testing.assert_allclose(y, 2.0 * np.asarray(x, np.float32), rtol=0)
+    # not numbers: JAX's own error, as before
+    with pytest.raises(ValueError):
+        jnp.asarray("not a number", dtype=jnp.float64)
+    with pytest.raises(ValueError):
+        _arrays.f64("not a number")

@@ -45,6 +45,7 @@ from .._arrays import (
     FloatScalar,
     add_rows,
     dot as _dot,
+    f64,
     host_op,
     param as _param,
     take_rows,
@@ -54,6 +55,7 @@ from .._environment import Environment
 from .._geometry import safe_norm
 from .._jit import cpu_jit
 from .._model import AbstractModel, SolverStructure
+from .._programs import eager_jit
 from .._validate import (
     check_choice,
     check_finite,
@@ -146,7 +148,7 @@ def submerged_fraction(z_a, z_b, qs, radius):
 
 
 def _none_or_f64(x):
-    return None if x is None else jnp.asarray(x, jnp.float64)
+    return None if x is None else f64(x)
 
 
 class _AbstractPoint(eqx.Module):
@@ -1632,17 +1634,19 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     gravity = any(isinstance(e, Gravity) for e in effects)
     buoyancy = any(isinstance(e, Buoyancy) for e in effects)
     g, rho = float(env.g), float(env.rho_water)
+    # (read on the host: an eager index of a JAX array compiles a program)
+    ds, ws, EAs = (np.asarray(a) for a in (model.d, model.w, model.EA))
     for k, ((a, b), N) in enumerate(zip(model.attach, model.segments)):
-        d = float(model.d[k])
-        w = (float(model.w[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
-        EA = float(model.EA[k])
+        d = float(ds[k])
+        w = (float(ws[k]) * gravity - rho * 0.25 * math.pi * d**2 * buoyancy) * g
+        EA = float(EAs[k])
         _, T = _catenary(at(a), at(b), float(L[k]), w, N, seabed_z, EA)
         # the stretched line: the catenary of the length under that tension
         stretched = float(L[k]) * (1.0 + max(T, 0.0) / EA)
         shape, _ = _catenary(at(a), at(b), stretched, w, N, seabed_z, EA)
         rows = top.tri_rows[top.body[model.line_nodes(k)[1:-1]]]
         pos[rows] = shape[1:-1]
-    y = jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    y = jax.device_put(np.concatenate([pos, np.zeros_like(pos)], axis=1))
     if not len(top.frames.owner):
         return y
     return _with_rigid_rows(model, y)
@@ -1650,7 +1654,7 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
 
 # The start's geometry in one compiled call: op by op, the motion tables'
 # interpolation alone compiled some fifty one-operation programs.
-@cpu_jit(tiered=True)
+@eager_jit(tiered=True)
 def _start_geometry(model: LineNetwork, t0):
     """Held points' positions, rod ends and points on bodies, unstretched
     lengths at `t0`."""
@@ -1664,7 +1668,7 @@ def _start_geometry(model: LineNetwork, t0):
     return hp, ends, model.unstretched_lengths(t0)[0]
 
 
-@cpu_jit(tiered=True)
+@eager_jit(tiered=True)
 def _with_rigid_rows(model: LineNetwork, y):
     return model.initial_rigid_rows(y)
 
@@ -1829,7 +1833,7 @@ def equilibrium(
     solve_rows[top.tri_rows] = True
     if free_points == "hold":
         solve_rows[top.tri_rows[top.free_rows]] = False
-    solve_rows = jnp.asarray(solve_rows)
+    solve_rows = jax.device_put(solve_rows)
     if y0 is None:
         y0 = initial_shape(model, effects, env, t0)
     x0 = host_op(lambda xp, y: y[:, :3], y0)

@@ -25,7 +25,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._arrays import FloatScalar
+from .._arrays import FloatScalar, as_array
 from .._effect import AbstractEffect, AbstractLoad
 from .._geometry import down
 from .._validate import check_nonnegative
@@ -111,7 +111,7 @@ class KelvinVoigt(AbstractTensionLaw):
     - `alpha`: dissipation constant, s (>= 0).
     """
 
-    alpha: FloatScalar = eqx.field(converter=jnp.asarray, default=0.01)
+    alpha: FloatScalar = eqx.field(converter=as_array, default=0.01)
     order: ClassVar[int] = 0
 
     def __check_init__(self):

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from .._arrays import FloatScalar
+from .._arrays import FloatScalar, f64
 from .._geometry import direction, safe_norm
 from .._linalg.banded import BlockTridiagonal, SecondOrderJacobian
 from .._model import AbstractModel, SolverStructure
@@ -42,7 +42,7 @@ from .effects import (
 
 
 def _param():
-    return eqx.field(converter=lambda x: jnp.asarray(x, dtype=jnp.float64))
+    return eqx.field(converter=f64)
 
 
 class AbstractString(AbstractModel):

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._arrays import FloatScalar
+from .._arrays import FloatScalar, f64
 from .._model import AbstractModel
 from .._validate import check_nonnegative, check_positive, check_shape
 from .vessels import (
@@ -36,7 +36,7 @@ from .vessels import (
 
 
 def _param(default=None):
-    conv = lambda x: jnp.asarray(x, dtype=jnp.float64)
+    conv = f64
     if default is None:
         return eqx.field(converter=conv)
     return eqx.field(converter=conv, default=default)

@@ -12,7 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._arrays import host_op
+from .._arrays import f64, host_op
 from .._environment import Environment, UniformCurrent
 from .._programs import eager_jit
 from .._scene import Scene
@@ -115,7 +115,6 @@ def aligned_equilibrium(model, effects, env, F_ast=0.0, heading=0.0):
     """The aligned equilibrium (both vessels heading `heading`, shuttle astern) for
     loads along that axis (current, and wind along the current): exact, from the
     surge balances. Returns the state."""
-    f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
     return _aligned_equilibrium(model, effects, env, f64(F_ast), f64(heading))
 
 

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._arrays import FloatScalar, host_op
+from .._arrays import FloatScalar, f64, host_op
 from .._effect import AbstractEffect, AbstractLoad
 from .._environment import Environment
 from .._model import AbstractModel
@@ -61,7 +61,7 @@ EPS_U = 0.01  # m/s, floor of the current speed U
 
 
 def _param(default=None):
-    conv = lambda x: jnp.asarray(x, dtype=jnp.float64)
+    conv = f64
     if default is None:
         return eqx.field(converter=conv)
     return eqx.field(converter=conv, default=default)

@@ -807,7 +807,7 @@ def arc_state(model: AbstractTether, bulge=(-1.0, 0.0, 0.0), t0: float = 0.0):
     xy = centre[None] + R * np.stack([np.cos(phi), np.sin(phi)], axis=1)
     pts = a[None] + xy[:, :1] * e1[None] + xy[:, 1:] * e2[None]
     pos = pts[1 : model.N + 1]
-    return jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    return jax.device_put(np.concatenate([pos, np.zeros_like(pos)], axis=1))
 
 
 def hanging_state(model: AbstractTether, direction=(0.0, 0.0, -1.0), t0: float = 0.0):
@@ -823,4 +823,4 @@ def hanging_state(model: AbstractTether, direction=(0.0, 0.0, -1.0), t0: float =
     e = e / np.linalg.norm(e)
     s = np.cumsum(g)[: model.N]
     pos = a[None] + s[:, None] * e[None]
-    return jnp.asarray(np.concatenate([pos, np.zeros_like(pos)], axis=1))
+    return jax.device_put(np.concatenate([pos, np.zeros_like(pos)], axis=1))

@@ -38,6 +38,7 @@ Choices the paper leaves open (stated here so that they can be changed):
   (0.05 m at 0.5 m/s, 5.7e-4 of L_r on its own) and is kept as `feedforward=False`.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -139,7 +140,7 @@ def tether_fixed(
         mass_per_length=rho * np.pi * d**2 / 4,  # neutral buoyancy
         added_mass=added_mass,
         N=N,
-        root=FixedEnd(jnp.zeros(3)),
+        root=FixedEnd(np.zeros(3)),
         fast=fast,
         released=schedule,
         **link_options,
@@ -259,11 +260,11 @@ def tether_fold(
         d=d,
         mass_per_length=mass_per_length,
         N=N,
-        root=FixedEnd(jnp.zeros(3)),
+        root=FixedEnd(np.zeros(3)),
         fast=FixedEnd(jnp.asarray(pts[-1])),
         **model_options,
     )
-    y0 = jnp.asarray(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
+    y0 = jax.device_put(np.concatenate([pts[:N], np.zeros((N, 3))], axis=1))
     return Scene(
         model=model,
         effects=(Gravity(), Buoyancy(), Drag(Cd=1.0, CdAx=0.1)),
