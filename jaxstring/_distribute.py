@@ -124,7 +124,14 @@ def export_chunk(fn, args):
     # the loaded program only, which a sweep does not do.
     data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
     outputs = jtu.tree_unflatten(exported.out_tree, exported.out_avals)
-    key = hashlib.sha256(data).hexdigest()[:32]
+    # keyed by what the program computes (its module, trees and shapes), which a
+    # program read back from the program folder shares with the one traced
+    # (their pickles differ): a worker's saved executable serves both
+    h = hashlib.sha256(exported.mlir_module_serialized)
+    for part in (exported.in_tree, exported.out_tree, exported.in_avals,
+                 exported.out_avals, exported.platforms):  # fmt: skip
+        h.update(repr(part).encode())
+    key = h.hexdigest()[:32]
     if cache_key is not None:
         _EXPORTED[cache_key] = (key, data, outputs)
     return key, data, leaves, outputs

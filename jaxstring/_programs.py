@@ -29,8 +29,7 @@ The program and the executable are stored with `pickle` (jax's own
 serialisation of a program needs the optional `flatbuffers` package): the
 exported function's private `_get_vjp` field, which cannot be pickled and is
 only needed to differentiate the loaded program, is dropped, so loaded programs
-serve forward solves only. An executable is machine code: like the rest of the
-folder, read only what this user's own processes wrote.
+serve forward solves only. The executables: `jaxstring._executables`.
 """
 
 import dataclasses
@@ -39,17 +38,14 @@ import hashlib
 import os
 import pathlib
 import pickle
-import platform
 import sys
-import threading
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
-import numpy as np
-from jax.experimental import serialize_executable
 
+from . import _executables as executables
 from ._config import (
     ensure_compilation_cache,
     program_folder,
@@ -253,7 +249,7 @@ class _Program:
     """A saved program's compilations in this process: each (the optimised one;
     for a tiered program the quick one first, `jaxstring._jit.Tiers`) read from
     the program folder where a process on this machine saved it
-    (`_read_executable`), else lowered and compiled from the traced program
+    (`jaxstring._executables`), else lowered and compiled from the traced program
     (read or traced: `_exported`) and saved there for the next process."""
 
     def __init__(self, fn, key, static, treedef, tiered, name):
@@ -265,7 +261,7 @@ class _Program:
         # A tiered program that an earlier process optimised starts optimised.
         self._tiers = (
             Tiers(name)
-            if tiered and not _executable_path(key, False).exists()
+            if tiered and not executables.path(program_folder(), key, "full").exists()
             else None
         )
 
@@ -279,7 +275,7 @@ class _Program:
                 if self._exported is None:
                     raise _Refused
             self._jits[quick] = jax.jit(
-                _named_call(self._exported, self._key, quick),
+                executables.named_call(self._exported, self._key, _tier(quick)),
                 compiler_options=cpu_compiler_options(quick),
             )
         return self._jits[quick]
@@ -288,15 +284,15 @@ class _Program:
         """The executable: read, or compiled and saved."""
         compiled = self._compilations.get(quick)
         if compiled is None:
-            compiled = _read_executable(self._key, quick)
+            folder, tier = program_folder(), _tier(quick)
+            compiled = executables.read(folder, self._key, tier)
             self._read[quick] = compiled is not None
             if compiled is None:
                 lowered = self._jitted(quick, leaves).lower(*leaves)
-                hits = _cache_hits()
-                compiled = lowered.compile()
-                if _cache_hits() == hits:  # compiled here, not read from JAX's cache
-                    lapack = b"lapack_" in self._exported.mlir_module_serialized
-                    _write_executable(self._key, quick, compiled, lapack)
+                lapack = executables.uses_lapack(self._exported)
+                compiled = executables.compile_and_save(
+                    lowered, folder, self._key, tier, lapack
+                )
             self._compilations[quick] = compiled
         return compiled
 
@@ -312,7 +308,9 @@ class _Program:
         try:  # the first run of a read executable, to its end
             return jax.block_until_ready(compiled(*leaves))
         except jax.errors.JaxRuntimeError:  # it does not run here: compile anew
-            _executable_path(self._key, quick).unlink(missing_ok=True)
+            executables.path(program_folder(), self._key, _tier(quick)).unlink(
+                missing_ok=True
+            )
             del self._compilations[quick]
             return self._compiled(quick, leaves)(*leaves)
 
@@ -327,124 +325,13 @@ class _Program:
         )
 
 
-def _named_call(exported, key, quick):
-    """`exported.call` named after the program's key and tier. The name is the
-    compiled module's, part of its key in JAX's compilation cache: a program
-    changed in name only (a new jaxstring source, the same operations) is then
-    compiled, not read from there, and its executable saved (`_cache_hits`)."""
-
-    def call(*leaves):
-        return exported.call(*leaves)
-
-    tier = "quick" if quick else "full"
-    call.__name__ = call.__qualname__ = f"saved_{key[:16]}_{tier}"
-    return call
+def _tier(quick: bool) -> str:
+    return "quick" if quick else "full"
 
 
 def _on_first_device(leaves) -> bool:
     first = jax.devices("cpu")[0]
     return all(not isinstance(x, jax.Array) or x.devices() == {first} for x in leaves)
-
-
-_HITS = threading.local()
-
-
-def _count_hit(event: str, **kwargs) -> None:
-    if event == "/jax/compilation_cache/cache_hits":
-        _HITS.count = getattr(_HITS, "count", 0) + 1
-
-
-@functools.cache
-def _listening() -> None:
-    jax.monitoring.register_event_listener(_count_hit)
-
-
-def _cache_hits() -> int:
-    """How many compilations this thread has read from JAX's compilation cache.
-    An executable read from there is not saved again: XLA:CPU serialises such an
-    executable incompletely (a later process that loads it fails to find its
-    kernels), so only an executable compiled in this process is saved."""
-    _listening()
-    return getattr(_HITS, "count", 0)
-
-
-@functools.cache
-def _machine() -> str:
-    """What an executable compiled here is keyed by besides its program: XLA's
-    CPU client (its version), the CPU devices, the XLA flags, the processor (its
-    model and instruction-set flags: XLA:CPU compiles for the host's)."""
-    cpu = jax.devices("cpu")
-    h = hashlib.sha256()
-    for part in (
-        cpu[0].client.platform_version,
-        str(len(cpu)),
-        os.environ.get("XLA_FLAGS", ""),
-        platform.machine(),
-        platform.processor(),
-        _processor(),
-    ):
-        h.update(part.encode())
-        h.update(b"\0")
-    return h.hexdigest()[:16]
-
-
-def _processor() -> str:
-    """The first processor's vendor, model and flags (Linux's /proc/cpuinfo;
-    empty elsewhere)."""
-    try:
-        text = pathlib.Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return ""
-    first = text.split("\n\n")[0].splitlines()
-    wanted = ("vendor_id", "model name", "flags", "Features", "CPU part")
-    return "\n".join(line for line in first if line.startswith(wanted))
-
-
-def _executable_path(key, quick) -> pathlib.Path:
-    tier = "quick" if quick else "full"
-    return pathlib.Path(program_folder()) / f"{key}.{_machine()}.{tier}.executable"
-
-
-def _read_executable(key, quick):
-    """The compilation of `key` saved by a process on this machine, loaded; None
-    where there is none or it cannot be loaded (then compiled again)."""
-    path = _executable_path(key, quick)
-    try:
-        payload, in_tree, out_tree, lapack = pickle.loads(path.read_bytes())
-        if lapack:
-            _lapack_ready()
-        return serialize_executable.deserialize_and_load(
-            payload,
-            in_tree,
-            out_tree,
-            backend="cpu",
-            execution_devices=jax.devices("cpu")[:1],
-        )
-    except Exception:  # noqa: BLE001  (none, unreadable, another version's)
-        return None
-
-
-@functools.cache
-def _lapack_ready() -> None:
-    """jaxlib's LAPACK kernels (LU, triangular solves) find their routines (in
-    scipy) when JAX first lowers one of them; a loaded executable is not
-    lowered, and its first LAPACK call would jump to a null routine. Called
-    before loading an executable that calls LAPACK."""
-    from jaxlib import lapack
-
-    lapack.prepare_lapack_call("getrf_ffi", np.dtype(np.float64))
-
-
-def _write_executable(key, quick, compiled, lapack: bool) -> None:
-    """Save `compiled`, with whether it calls LAPACK (`_lapack_ready`)."""
-    path = _executable_path(key, quick)
-    try:
-        data = pickle.dumps((*serialize_executable.serialize(compiled), lapack))
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except Exception:  # noqa: BLE001  (not saved: the next process compiles it)
-        pass
 
 
 def call(fn, *args, tiered: bool = False):

@@ -4,8 +4,9 @@ A worker is a process of a `concurrent.futures` executor (jaxstring's own spawn
 pool over the host's cores, or one the user passes). The parent traces a sweep's
 chunk program, or an identification's experiment program, once and saves it
 (`jax.export`, pickled as `jaxstring._programs` stores programs); a worker loads
-it, compiles it on its CPU (or finds the compilation in the persistent cache),
-and runs it on the arrays it is sent. Only JAX is needed here: a worker traces
+it, compiles it on its CPU (or loads the executable a worker on this machine
+saved, `jaxstring._executables`, or finds the compilation in the persistent
+cache), and runs it on the arrays it is sent. Only JAX is needed here: a worker traces
 nothing.
 
 Compiling once for the pool. Every worker of a pool gets the same program at the
@@ -128,18 +129,36 @@ def ready() -> tuple:
 
 def run(key: str, program: bytes, leaves: list):
     """The pickled exported `program` (named `key`) applied to `leaves` (NumPy
-    arrays); its outputs as NumPy arrays."""
+    arrays); its outputs as NumPy arrays. With a compilation cache, the program's
+    executable is read from its `programs` folder where a worker on this machine
+    saved it, else compiled (`_compile`) and saved there (`jaxstring._executables`)."""
     import jax
 
+    from . import _executables as executables
     from ._jit import cpu_compiler_options
 
     jax.config.update("jax_enable_x64", True)
     compiled = _COMPILED.get(key)
     if compiled is None:
-        exported = pickle.loads(program)
-        lowered = jax.jit(exported.call, compiler_options=cpu_compiler_options()).lower(
-            *leaves
-        )
-        compiled = _compile(lowered, key, jax.config.jax_compilation_cache_dir)
+        cache_dir = jax.config.jax_compilation_cache_dir
+        folder = os.path.join(cache_dir, "programs") if cache_dir else None
+        if folder is not None:
+            compiled = executables.read(folder, key, "full")
+        if compiled is None:
+            exported = pickle.loads(program)
+            lowered = jax.jit(
+                executables.named_call(exported, key, "full"),
+                compiler_options=cpu_compiler_options(),
+            ).lower(*leaves)
+            if folder is not None:
+                os.makedirs(folder, exist_ok=True)
+            compiled = executables.compile_and_save(
+                lowered,
+                folder,
+                key,
+                "full",
+                executables.uses_lapack(exported),
+                compile=lambda lowered: _compile(lowered, key, cache_dir),
+            )
         _COMPILED[key] = compiled
     return jax.device_get(compiled(*leaves))

@@ -399,3 +399,60 @@ def test_workers_compile_a_program_once_and_read_it_from_the_cache(tmp_path):
         np.asarray(_worker._compile(lowered, other, cache)(x)), expected, rtol=1e-15
     )
     assert (folder / f"{other}.done").exists()
+
+
+_WORKER_RUN = """
+import pickle, sys
+import numpy as np
+from jaxstring import _worker
+
+cache, key, program_file, mode = sys.argv[1:]
+_worker.init(cache)
+program = open(program_file, "rb").read() if mode == "compile" else b"not a program"
+a = np.array([[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
+b = np.array([1.0, 2.0, 3.0])
+out = _worker.run(key, program, [a, b])
+print(repr(np.asarray(out["x"]).tolist()))
+"""
+
+
+def test_a_later_worker_runs_the_executable_an_earlier_one_saved(tmp_path):
+    # A worker compiles a chunk program (an LU solve: LAPACK) and saves its
+    # executable in the cache's `programs` folder; a worker of a later pool (a
+    # fresh process) runs the executable without unpickling the program.
+    import ast
+    import dataclasses
+    import os
+    import pickle
+    import subprocess
+    import sys
+
+    import jax
+
+    def solve(a, b):
+        return {"x": jnp.linalg.solve(a, b)}
+
+    avals = [jax.ShapeDtypeStruct((3, 3), jnp.float64),
+             jax.ShapeDtypeStruct((3,), jnp.float64)]  # fmt: skip
+    exported = jax.export.export(jax.jit(solve), platforms=("cpu",))(*avals)
+    program = tmp_path / "program"
+    program.write_bytes(pickle.dumps(dataclasses.replace(exported, _get_vjp=None)))
+    (tmp_path / "run.py").write_text(_WORKER_RUN)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    cache = tmp_path / "cache"
+
+    def worker(mode):
+        run = subprocess.run(
+            [sys.executable, str(tmp_path / "run.py"), str(cache), "k" * 32,
+             str(program), mode],
+            env=env, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert run.returncode == 0, run.stderr[-2000:]
+        return ast.literal_eval(run.stdout.splitlines()[-1])
+
+    first = worker("compile")
+    assert len(list((cache / "programs").glob("*.full.executable"))) == 1
+    second = worker("load")
+    a = np.array([[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
+    np.testing.assert_allclose(second, np.linalg.solve(a, [1.0, 2.0, 3.0]), rtol=1e-14)
+    assert first == second

@@ -1,0 +1,160 @@
+"""Compiled executables saved to a folder and loaded by later processes.
+
+XLA's executable of a program (`jax.stages.Compiled`), serialised with
+`jax.experimental.serialize_executable`, is machine code for this machine's
+processor: it is saved under the program's key and a key of the machine
+(`machine`) and only loaded where both match. A process that loads one skips
+the program's tracing, lowering and compilation (`jaxstring._programs`: saved
+programs; `jaxstring._worker`: the chunk programs of a process pool). Only JAX
+is imported here (a pool's workers import nothing else).
+
+Two things an executable needs that its lowering would have done, and which
+loading it skips or loses:
+
+- jaxlib's LAPACK kernels (LU, triangular solves) find their routines (in scipy)
+  when JAX first lowers one of them; an executable that calls LAPACK is saved
+  with a flag, and they are made ready before it is loaded (without it its first
+  LAPACK call jumps to a null routine);
+- XLA:CPU serialises an executable that JAX read from its compilation cache
+  incompletely (a later process that loads it fails to find its kernels), so
+  only an executable compiled in the process is saved (`compile_and_save`). A
+  saved program is compiled under a name of its own key (`named_call`): the name
+  is part of its key in JAX's cache, so a renamed program (a new jaxstring
+  source, the same operations) is compiled, not read from there.
+
+An executable is machine code: like the rest of the cache folder, read only what
+this user's own processes wrote.
+"""
+
+import functools
+import hashlib
+import os
+import pathlib
+import pickle
+import platform
+import threading
+
+import jax
+import numpy as np
+from jax.experimental import serialize_executable
+
+
+def named_call(exported, key: str, tier: str):
+    """`exported.call` (a `jax.export.Exported`) named after the program's key and
+    tier ("full" or "quick"): the name of its compiled module."""
+
+    def call(*leaves):
+        return exported.call(*leaves)
+
+    call.__name__ = call.__qualname__ = f"saved_{key[:16]}_{tier}"
+    return call
+
+
+def uses_lapack(exported) -> bool:
+    """Whether the traced program calls jaxlib's LAPACK kernels."""
+    return b"lapack_" in exported.mlir_module_serialized
+
+
+@functools.cache
+def machine() -> str:
+    """What an executable compiled here is keyed by besides its program: XLA's
+    CPU client (its version), the CPU devices, the XLA flags, the processor (its
+    model and instruction-set flags: XLA:CPU compiles for the host's)."""
+    cpu = jax.devices("cpu")
+    h = hashlib.sha256()
+    for part in (
+        cpu[0].client.platform_version,
+        str(len(cpu)),
+        os.environ.get("XLA_FLAGS", ""),
+        platform.machine(),
+        platform.processor(),
+        _processor(),
+    ):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def _processor() -> str:
+    """The first processor's vendor, model and flags (Linux's /proc/cpuinfo;
+    empty elsewhere)."""
+    try:
+        text = pathlib.Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return ""
+    first = text.split("\n\n")[0].splitlines()
+    wanted = ("vendor_id", "model name", "flags", "Features", "CPU part")
+    return "\n".join(line for line in first if line.startswith(wanted))
+
+
+def path(folder, key: str, tier: str) -> pathlib.Path:
+    """Where the executable of program `key` compiled on this machine is saved."""
+    return pathlib.Path(folder) / f"{key}.{machine()}.{tier}.executable"
+
+
+def read(folder, key: str, tier: str):
+    """The executable of `key` saved by a process on this machine, loaded for the
+    first CPU device; None where there is none or it cannot be loaded (then it
+    is compiled again)."""
+    try:
+        payload, in_tree, out_tree, lapack = pickle.loads(
+            path(folder, key, tier).read_bytes()
+        )
+        if lapack:
+            _lapack_ready()
+        return serialize_executable.deserialize_and_load(
+            payload,
+            in_tree,
+            out_tree,
+            backend="cpu",
+            execution_devices=jax.devices("cpu")[:1],
+        )
+    except Exception:  # noqa: BLE001  (none, unreadable, another version's)
+        return None
+
+
+@functools.cache
+def _lapack_ready() -> None:
+    from jaxlib import lapack
+
+    lapack.prepare_lapack_call("getrf_ffi", np.dtype(np.float64))
+
+
+def compile_and_save(lowered, folder, key: str, tier: str, lapack: bool, compile=None):
+    """`lowered` compiled (by `compile(lowered)`, default `lowered.compile()`) and,
+    where that compiled it rather than reading it from JAX's compilation cache,
+    saved in `folder` (None: not saved) with the flag `lapack` (`uses_lapack`)."""
+    hits = _cache_hits()
+    compiled = lowered.compile() if compile is None else compile(lowered)
+    if folder is not None and _cache_hits() == hits:
+        _write(path(folder, key, tier), compiled, lapack)
+    return compiled
+
+
+def _write(target: pathlib.Path, compiled, lapack: bool) -> None:
+    try:
+        data = pickle.dumps((*serialize_executable.serialize(compiled), lapack))
+        tmp = target.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, target)
+    except Exception:  # noqa: BLE001  (not saved: the next process compiles it)
+        pass
+
+
+_HITS = threading.local()
+
+
+def _count_hit(event: str, **kwargs) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _HITS.count = getattr(_HITS, "count", 0) + 1
+
+
+@functools.cache
+def _listening() -> None:
+    jax.monitoring.register_event_listener(_count_hit)
+
+
+def _cache_hits() -> int:
+    """How many compilations this thread has read from JAX's compilation cache."""
+    _listening()
+    return getattr(_HITS, "count", 0)
