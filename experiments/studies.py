@@ -748,11 +748,14 @@ STUDIES = (
             *TANDEM,
             *LINES,
             "jaxstring/_programs.py",
+            "jaxstring/_executables.py",
+            "jaxstring/_worker.py",
+            "jaxstring/_arrays.py",
             "jaxstring/_config.py",
         ),
         (
             Run((), _files("first_result")),
-            Run(("--ref", "89d19c7", "--rounds", "2"), _files("first_result_ref")),
+            Run(("--ref", "1b106b1", "--rounds", "2"), _files("first_result_ref")),
         ),
     ),
     Study(
