@@ -120,12 +120,12 @@ def _lapack_ready() -> None:
     lapack.prepare_lapack_call("getrf_ffi", np.dtype(np.float64))
 
 
-def compile_and_save(lowered, folder, key: str, tier: str, lapack: bool, compile=None):
-    """`lowered` compiled (by `compile(lowered)`, default `lowered.compile()`) and,
+def compile_and_save(lowered, folder, key: str, tier: str, lapack: bool, compiler=None):
+    """`lowered` compiled (by `compiler(lowered)`, default `lowered.compile()`) and,
     where that compiled it rather than reading it from JAX's compilation cache,
     saved in `folder` (None: not saved) with the flag `lapack` (`uses_lapack`)."""
     hits = _cache_hits()
-    compiled = lowered.compile() if compile is None else compile(lowered)
+    compiled = lowered.compile() if compiler is None else compiler(lowered)
     if folder is not None and _cache_hits() == hits:
         _write(path(folder, key, tier), compiled, lapack)
     return compiled

@@ -158,7 +158,7 @@ def run(key: str, program: bytes, leaves: list):
                 key,
                 "full",
                 executables.uses_lapack(exported),
-                compile=lambda lowered: _compile(lowered, key, cache_dir),
+                compiler=lambda lowered: _compile(lowered, key, cache_dir),
             )
         _COMPILED[key] = compiled
     return jax.device_get(compiled(*leaves))
