@@ -329,8 +329,13 @@ def _tier(quick: bool) -> str:
     return "quick" if quick else "full"
 
 
+@functools.cache
+def _first_cpu():
+    return jax.devices("cpu")[0]
+
+
 def _on_first_device(leaves) -> bool:
-    first = jax.devices("cpu")[0]
+    first = _first_cpu()
     return all(not isinstance(x, jax.Array) or x.devices() == {first} for x in leaves)
 
 
