@@ -7,7 +7,10 @@ compilation cache and with a warm one, and how long does `import jaxstring` add 
 a temporary folder (`JAXSTRING_CACHE_DIR`): first with the folder empty ("cold"),
 then again ("warm": the compiled and traced solves saved by the first run). Reported
 per case: the import, the first call (trace, compile, run), a second call in the
-same process (the run alone) and the whole process's wall time.
+same process (the run alone) and the whole process's wall time. The package is
+byte-compiled first (`compileall`), as `pip install` does: an interpreter run
+with PYTHONDONTWRITEBYTECODE would otherwise compile jaxstring's source in every
+process.
 
 Run: ``python experiments/first_result.py [--quick] [--only NAME ...]``. Writes
 results/first_result.{md,csv}.
@@ -117,6 +120,20 @@ print(json.dumps(dict(import_s=t_import, first_call_s=t_first, second_call_s=t_s
 """
 
 
+def byte_compile(tree):
+    """Byte-compile the jaxstring package under `tree`, as `pip install` does."""
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "compileall",
+            "-q",
+            str(pathlib.Path(tree) / "jaxstring"),
+        ],
+        check=True,
+    )
+
+
 def run_case(name, cache, env):
     setup, call = CASES[name]
     code = _CHILD.format(setup=setup, call=call)
@@ -179,6 +196,8 @@ def compare(ref, rounds=3, only=None):
     got = {}
     with common.ref_worktree(ref) as refdir:
         codes = {"this tree": root, f"ref {ref[:10]}": refdir}
+        for tree in codes.values():
+            byte_compile(tree)
         for _ in range(rounds):
             for name in names:
                 for code, tree in codes.items():
@@ -216,6 +235,7 @@ def main(quick=False, only=None):
         [os.path.dirname(HERE), env.get("PYTHONPATH", "")]
     )
     names = only or (list(CASES)[:2] if quick else list(CASES))
+    byte_compile(os.path.dirname(HERE))
     rows = []
     for name in names:
         with tempfile.TemporaryDirectory() as cache:

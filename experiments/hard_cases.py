@@ -204,7 +204,7 @@ def outcome(traj, nan) -> str:
         return "bad"
     if traj.ok:
         return "success"
-    code = int(js._solvers.diffrax_compat.result_code(traj.result))
+    code = int(traj.result)
     import diffrax as dfx
 
     if code == int(dfx.RESULTS.max_steps_reached._value):

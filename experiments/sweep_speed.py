@@ -160,7 +160,7 @@ def profile(k, Ms, quick):
     """Per-call CPU time of the pieces of one implicit step for M members at once."""
     import jax.numpy as jnp
 
-    from jaxstring._fit import resolve
+    from jaxstring._parameters import resolve
     from jaxstring._solvers.stage_newton import batched_factor
     from jaxstring._sweep import _Batch
 

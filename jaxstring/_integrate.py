@@ -10,7 +10,6 @@ stacked), with the solver and controller that `solver_parts` builds for the scen
 
 import dataclasses
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -19,16 +18,9 @@ import jax.tree_util as jtu
 from . import _programs
 from ._arrays import host_map, host_op, on_host
 from ._jit import cpu_jit
+from ._lazy import diffrax as dfx
 from ._scene import Scene, scene_vector_field
 from ._solve_config import SolveConfig
-from ._solvers.diffrax_compat import (
-    result_code,
-    result_from_code,
-    save_times_checked,
-)
-from ._solvers.projected import ProjectedSolver
-from ._solvers.registry import build_solver
-from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
 from ._validate import check_times
 
@@ -38,6 +30,11 @@ def solver_parts(scene: Scene, config: SolveConfig, norm=None, differentiable=Tr
     initial step of `scene` under `config`, as every solve builds them. `norm`: the
     controller's error norm (default: RMS). `differentiable`: False for a solve
     that nothing differentiates (`solve`)."""
+    # the solvers import diffrax: not imported by a process that only runs saved
+    # programs (`jaxstring._lazy`)
+    from ._solvers.registry import build_solver
+    from ._solvers.step_size import make_controller
+
     nr, na = config.newton_tolerances()
     solver = build_solver(config.solver, nr, na, scene, differentiable)
     kw = {} if norm is None else {"norm": norm}
@@ -72,6 +69,8 @@ def integrate(
     whether it succeeded, with the data up to a failure. The save times of
     `saveat` must lie in [t0, t1] and increase (the callers check them before
     anything is traced)."""
+    from ._solvers.diffrax_compat import save_times_checked
+
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
         if progress
@@ -96,16 +95,10 @@ def integrate(
         )
 
 
-class _ProjectedSolverAD(ProjectedSolver):
-    # diffrax's ForwardMode/DirectAdjoint read `solver.scan_kind` (the wrapped
-    # solver's, set below); ProjectedSolver does not forward it.
-    @property
-    def scan_kind(self):
-        return getattr(self.solver, "scan_kind", None)
-
-
 def _projected(solver, adjoint):
     """`solver` wrapped to project onto the model's constraint after every step."""
+    from ._solvers.projected import ProjectedSolver, ProjectedSolverAD
+
     if type(adjoint) is dfx.RecursiveCheckpointAdjoint and adjoint.checkpoints is None:
         return ProjectedSolver(solver)
     # diffrax sets the stage loop of a Runge-Kutta solver to a kind it can
@@ -121,7 +114,7 @@ def _projected(solver, adjoint):
             solver = eqx.tree_at(
                 lambda s: s.scan_kind, solver, kind, is_leaf=lambda x: x is None
             )
-    return _ProjectedSolverAD(solver)
+    return ProjectedSolverAD(solver)
 
 
 def solve_scene(
@@ -205,8 +198,7 @@ def _solve_fields(scene, config, ts):
     """`solve`'s Trajectory as a dict of arrays (a saved program's output: never
     differentiated)."""
     traj = solve(scene, config, ts, differentiable=False)
-    fields = {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
-    return fields | {"result": result_code(traj.result)}
+    return {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
 
 
 def padded_length(n: int) -> int:
@@ -290,10 +282,7 @@ def solve_compiled(scene: Scene, config: SolveConfig, ts) -> Trajectory:
     if not config.progress and _programs.usable((scene, config, ts)):
         fields = _programs.call(_solve_fields, scene, config, ts)
         if fields is not None:
-            traj = Trajectory(
-                **(fields | {"result": result_from_code(fields["result"])})
-            )
-            return _first_rows(traj, n)
+            return _first_rows(Trajectory(**fields), n)
     leaves = jtu.tree_leaves((scene, config, ts))
     traced = any(isinstance(x, jax.core.Tracer) for x in leaves)
     jitted = jit_solve if traced else jit_solve_values

@@ -36,13 +36,14 @@ import numpy as np
 import optimistix as optx
 
 from . import _distribute
+from ._adjoints import SensitivityAdjoint
 from ._blas import single_blas_thread
 from ._fit import check_jacobian_adjoint, identify_config, resolve, resolve_params
 from ._integrate import solve
 from ._jit import cpu_jit
 from ._scene import Scene
 from ._sensitivity import derivatives
-from ._solve_config import SensitivityAdjoint, SolveConfig
+from ._solve_config import SolveConfig
 from ._validate import check_int, check_positive, show
 
 

@@ -35,12 +35,12 @@ serve forward solves only. The executables: `jaxstring._executables`.
 import dataclasses
 import functools
 import hashlib
+import importlib.metadata
 import os
 import pathlib
 import pickle
 import sys
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
@@ -71,6 +71,17 @@ def source_digest() -> str:
         h.update(str(f.relative_to(root)).encode())
         h.update(f.read_bytes())
     return h.hexdigest()
+
+
+@functools.cache
+def _library_versions() -> str:
+    """The versions of the libraries whose code a solve's program holds, read from
+    their installed metadata (diffrax and optimistix are not imported by a process
+    that only runs saved programs: `jaxstring._lazy`)."""
+    return ",".join(
+        importlib.metadata.version(name)
+        for name in ("diffrax", "equinox", "optimistix", "lineax")
+    )
 
 
 def _classes(x, out=None) -> list:
@@ -208,8 +219,7 @@ def _full_key(fn, static, treedef, leaves) -> str | None:
         str([(x.shape, str(x.dtype)) for x in leaves]),
         jax.__version__,
         jax.lib.__version__,
-        dfx.__version__,
-        eqx.__version__,
+        _library_versions(),
         source_digest(),
         repr(cpu_compiler_options()),
     ):

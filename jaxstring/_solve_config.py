@@ -11,15 +11,14 @@ import dataclasses
 import functools
 from typing import Any
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._arrays import host_op
-from ._solvers.registry import check_solver, is_adaptive
-from ._solvers.step_size import STEP_CONTROLS
+from ._lazy import diffrax as dfx, is_instance
+from ._solvers.names import ADJOINTS, STEP_CONTROLS, check_solver, is_adaptive
 from ._validate import (
     check_bool,
     check_choice,
@@ -63,34 +62,8 @@ SOLVE_DEFAULTS: dict[str, dict[str, Any]] = {
     "sweep": {"solver": "auto"},
 }
 
-ADJOINTS = ("auto", "recursive", "direct", "backsolve", "forward", "sensitivity")
-
 # The step of a fixed-step solver when `dt0` is not given: the paper's, s.
 FIXED_STEP_DT0 = 0.005
-
-
-class SensitivityAdjoint(dfx.ForwardMode):
-    """Marker adjoint: derivatives from forward sensitivities integrated with the
-    state under the same error control (`jaxstring._sensitivity`). A plain solve
-    under it is a forward-mode solve."""
-
-
-def make_adjoint(adjoint, checkpoints=None):
-    """A diffrax adjoint from a name of `ADJOINTS` (`"auto"` and `"recursive"`:
-    diffrax's checkpointed reverse mode; `"sensitivity"`: `SensitivityAdjoint`) or
-    a `diffrax.AbstractAdjoint` instance (returned as is)."""
-    if isinstance(adjoint, dfx.AbstractAdjoint):
-        return adjoint
-    check_choice("adjoint", adjoint, ADJOINTS)
-    if adjoint in ("auto", "recursive"):
-        return dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints)
-    if adjoint == "direct":
-        return dfx.DirectAdjoint()
-    if adjoint == "backsolve":
-        return dfx.BacksolveAdjoint()
-    if adjoint == "sensitivity":
-        return SensitivityAdjoint()
-    return dfx.ForwardMode()
 
 
 def _f64(x):
@@ -196,7 +169,7 @@ class SolveConfig(eqx.Module):
         for name in ("newton_rtol", "newton_atol"):
             if getattr(self, name) is not None:
                 check_positive(name, getattr(self, name))
-        if not isinstance(self.adjoint, dfx.AbstractAdjoint):
+        if not is_instance(self.adjoint, "diffrax", "AbstractAdjoint"):
             check_choice("adjoint", self.adjoint, ADJOINTS)
         if self.checkpoints not in (None, "auto"):
             check_int("checkpoints", self.checkpoints, 1)
@@ -272,6 +245,8 @@ class SolveConfig(eqx.Module):
         (forward mode under "auto")."""
         if self.adjoint == "auto" and derivative == "jacobian":
             return dfx.ForwardMode()
+        from ._adjoints import make_adjoint
+
         checkpoints = self.checkpoints if isinstance(self.checkpoints, int) else None
         return make_adjoint(self.adjoint, checkpoints)
 
@@ -318,7 +293,9 @@ class SolveConfig(eqx.Module):
             check_times("ts", self.ts, scene.t0, scene.t1)
         projects = self.project and scene.model.projects
         name = self.adjoint
-        if isinstance(name, dfx.AbstractAdjoint):
+        if is_instance(name, "diffrax", "AbstractAdjoint"):
+            from ._adjoints import SensitivityAdjoint
+
             name = {
                 dfx.BacksolveAdjoint: "backsolve",
                 SensitivityAdjoint: "sensitivity",

@@ -71,7 +71,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -80,18 +79,13 @@ import numpy as np
 
 from . import _distribute
 from ._blas import single_blas_thread
-from ._fit import _follow, parameter_names, resolve
 from ._integrate import integrate, solve
 from ._jit import cpu_jit
+from ._lazy import diffrax as dfx
+from ._parameters import _follow, parameter_names, resolve
 from ._presets import solver_for
 from ._scene import Scene
 from ._solve_config import SolveConfig, solve_config
-from ._solvers.diffrax_compat import code_message, result_code
-from ._solvers.fixed_step import ThetaMethod
-from ._solvers.projected import ProjectedSolver
-from ._solvers.registry import _MAX_ITERS_ADAPTIVE, KVAERNO, kvaerno_class
-from ._solvers.stage_newton import StageNewton
-from ._solvers.step_size import make_controller
 from ._trajectory import Trajectory
 from ._validate import check_choice, check_int, show
 
@@ -146,7 +140,7 @@ def _member(vals, scene, getters, fn, config, ts):
     )
     traj = solve(sc, config, ts, differentiable=False)  # a sweep's: values only
     stats = {k: v for k, v in traj.stats.items() if k != "max_steps"}
-    return fn(traj, sc), result_code(traj.result), stats
+    return fn(traj, sc), traj.result, stats
 
 
 def _run_group(vals, scene, getters, fn, config, ts, batch_size):
@@ -170,11 +164,15 @@ def _sweep_local(vals, scene, getters, fn, config, ts, batch_size):
 # Lockstep: all members as one ODE with one shared step sequence
 
 
+# The adaptive solvers of the lockstep mode -> their diffrax class (the Kvaerno
+# methods' class is the scene's: `kvaerno_class`).
 LOCKSTEP_SOLVERS = {
-    **KVAERNO,  # the class per scene: kvaerno_class
-    "implicit_euler": dfx.ImplicitEuler,
-    "tsit5": dfx.Tsit5,
-    "dopri5": dfx.Dopri5,
+    "kvaerno3": None,
+    "kvaerno4": None,
+    "kvaerno5": None,
+    "implicit_euler": "ImplicitEuler",
+    "tsit5": "Tsit5",
+    "dopri5": "Dopri5",
 }
 
 
@@ -256,15 +254,19 @@ LOCKSTEP_FIXED = {"implicit_euler_fixed": 1.0, "theta": 0.5, "trapezoid": 0.5}
 
 
 def _lockstep_solver(config, scene):
+    from ._solvers.fixed_step import ThetaMethod
+    from ._solvers.registry import _MAX_ITERS_ADAPTIVE, kvaerno_class
+    from ._solvers.stage_newton import StageNewton
+
     name = config.solver
     nr, na = config.newton_tolerances()
     if name in LOCKSTEP_FIXED:
         return ThetaMethod(theta=LOCKSTEP_FIXED[name], rtol=nr, atol=na)
-    if name in KVAERNO:
+    if LOCKSTEP_SOLVERS[name] is None:
         cls = kvaerno_class(name, scene)
     else:
-        cls = LOCKSTEP_SOLVERS[name]
-    if cls in (dfx.Tsit5, dfx.Dopri5):
+        cls = getattr(dfx, LOCKSTEP_SOLVERS[name])
+    if name in ("tsit5", "dopri5"):
         return cls()
     chord = StageNewton(
         rtol=nr,
@@ -304,6 +306,10 @@ def _lockstep(vals, scene, getters, fn, config, ts):
     branches (Jacobian refresh, step rejection) stay scalar: no member waits in a
     masked loop iteration, and no `lax.cond` turns into "compute both branches".
     """
+    from ._solvers.diffrax_compat import result_code
+    from ._solvers.projected import ProjectedSolver
+    from ._solvers.step_size import make_controller
+
     batch = _Batch(vals, scene, getters)
     n = vals[0].shape[0]
     y0 = jnp.broadcast_to(scene.y0, (n,) + jnp.shape(scene.y0))
@@ -604,6 +610,18 @@ def _group_size(batch_size, n, local, arrays, scene, getters, fn, config, ts,
     return _distribute.fit_group(local, args, per_device, devs[0])
 
 
+def _status(code: int, reason: str | None) -> str:
+    """A member's status: "success", the solver's failure message, or why its
+    worker process failed."""
+    if code == 0:
+        return "success"
+    if code == _distribute.WORKER_FAILED:
+        return f"worker process failed: {reason or 'in another process'}"
+    from ._solvers.diffrax_compat import code_message
+
+    return code_message(code)
+
+
 def _workers(processes, executor, members: int) -> int:
     """The worker processes of this host a sweep of `members` uses: `processes`,
     or with "auto" the host's cores where the members are many enough to pay for
@@ -879,12 +897,7 @@ def sweep(
     stats = {k: take(v) for k, v in stats.items()}
     ok = codes == 0
     reasons = {int(where[start + m]): r for m, r in failed.items()}
-    status = [
-        f"worker process failed: {reasons.get(i, 'in another process')}"
-        if c == _distribute.WORKER_FAILED
-        else code_message(c)
-        for i, c in enumerate(codes.ravel())
-    ]
+    status = [_status(int(c), reasons.get(i)) for i, c in enumerate(codes.ravel())]
     return SweepResult(
         values={g.label: a.reshape(shape) for g, a in zip(getters, arrays)},
         out=out,

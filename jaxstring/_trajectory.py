@@ -1,6 +1,5 @@
 """The result of a simulation."""
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -8,7 +7,6 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._arrays import FloatScalar, IntScalar, host_op
-from ._solvers.diffrax_compat import result_code, result_message
 
 
 class Trajectory(eqx.Module):
@@ -24,7 +22,8 @@ class Trajectory(eqx.Module):
       m/s), `tension` and `strain` at the tension points (`k` elements in
       displacement variables, `k + 1` nodes in natural variables; N and -),
       `energy` (`(T,)`, J) and `constraint_error` (`(T,)`, max | |t| - 1 |).
-    - `result`: the diffrax result code; `ok`, `status` describe it.
+    - `result`: the solver's integer result code (0: success; else the index of
+      diffrax's `RESULTS`); `ok`, `status` describe it.
     - `stats`: solver statistics (`num_steps`, `num_accepted_steps`,
       `num_rejected_steps`, `max_steps`).
     - `t_end`, `n_valid`: the last save time reached and the number of valid rows.
@@ -35,7 +34,7 @@ class Trajectory(eqx.Module):
     ts: Float[Array, " T"]
     ys: Array
     obs: dict
-    result: dfx.RESULTS
+    result: IntScalar
     stats: dict
     t_end: FloatScalar
     n_valid: IntScalar
@@ -49,12 +48,16 @@ class Trajectory(eqx.Module):
 
     @property
     def ok(self) -> bool:
-        return int(np.asarray(result_code(self.result))) == 0
+        return int(np.asarray(self.result)) == 0
 
     @property
     def status(self) -> str:
         """'success' or the failure message of the solver."""
-        return "success" if self.ok else result_message(self.result)
+        if self.ok:
+            return "success"
+        from ._solvers.diffrax_compat import code_message
+
+        return code_message(int(np.asarray(self.result)))
 
     @property
     def end_mass(self) -> Float[Array, "T dim"]:
@@ -64,7 +67,7 @@ class Trajectory(eqx.Module):
     @classmethod
     def from_solution(cls, ts, ys, result, stats, scene) -> "Trajectory":
         """The Trajectory of saved states `ys` at `ts` of `scene`, with the one
-        failure mask.
+        failure mask; `result`: diffrax's result.
 
         States after a failure are inf in diffrax's output: observables are evaluated
         on finite states only (the initial state stands in for the others), and
@@ -82,7 +85,9 @@ class Trajectory(eqx.Module):
             + (("max_steps",) if "max_steps" in stats else ())
         }
         t_end = jnp.where(n_valid > 0, ts[jnp.maximum(n_valid - 1, 0)], scene.t0)
-        return cls(ts, ys, obs, result, stats, t_end, n_valid)
+        from ._solvers.diffrax_compat import result_code
+
+        return cls(ts, ys, obs, result_code(result), stats, t_end, n_valid)
 
     def summary(self) -> str:
         s = self.stats

@@ -413,3 +413,51 @@ def test_a_saved_program_of_a_users_own_class_follows_its_source(tmp_path):
 
 def _double(x):
     return {"y": 2.0 * x}
+
+
+_WARM_DRIVER = """
+import json, sys
+import numpy as np
+import jaxstring as js
+scene = js.pendulum.string_pendulum(k=6, EA=1e4, t1=0.3)
+traj = js.simulate(scene)
+print(json.dumps({"end": np.asarray(traj.end_mass[-1]).tolist(), "ok": traj.ok,
+                  "status": traj.status,
+                  "imported": [m for m in ("diffrax", "optimistix", "lineax")
+                               if m in sys.modules]}))
+"""
+
+
+def test_a_later_process_runs_a_saved_solve_without_importing_diffrax(tmp_path):
+    # A process that runs a saved solve neither traces nor builds a solver, so it
+    # imports neither diffrax nor optimistix (`jaxstring._lazy`); the first
+    # process, which traces the solve, does.
+    import json
+    import os
+    import subprocess
+    import sys
+
+    # (as a user runs it: the tests' settings of equinox's checks and of the
+    # caches left out)
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("EQX_ON_ERROR", "JAXSTRING_CACHE") and not k.startswith("JAX_")
+    }
+    env["JAXSTRING_CACHE_DIR"] = str(tmp_path / "cache")
+
+    def run():
+        out = subprocess.run(
+            [sys.executable, "-c", _WARM_DRIVER],
+            env=env, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert out.returncode == 0, out.stderr[-2000:]
+        return json.loads(out.stdout.splitlines()[-1])
+
+    first, second = run(), run()
+    assert first["imported"] == ["diffrax", "optimistix", "lineax"]
+    assert second["imported"] == []
+    assert first["ok"] and second["ok"] and second["status"] == "success"
+    assert second["end"] == first["end"]
+    # released from the horizontal, the end mass first falls freely: g t^2 / 2
+    np.testing.assert_allclose(first["end"][1], -0.5 * 9.81 * 0.3**2, rtol=1e-2)

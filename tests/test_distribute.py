@@ -17,6 +17,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import _distribute
+from jaxstring._parameters import resolve
 
 from .helpers import KillingPool, run_distributed
 
@@ -192,7 +193,7 @@ def test_sweep_programs_export_without_host_callbacks(solver):
     scene = _scene()
     config = js.SolveConfig(solver=solver, dt0=0.01, n_save=5)
     ts = config.save_times(scene.t0, scene.t1)
-    getters = (js._fit.resolve(scene, "alpha"),)
+    getters = (resolve(scene, "alpha"),)
     args = ((ALPHAS[:2],), scene, getters, lambda traj, s: traj.end_mass, config, ts, 2)
     key, program, leaves, outputs = _distribute.export_chunk(_sweep_local, args)
     assert len(program) > 0 and outputs is not None
@@ -210,7 +211,7 @@ def test_a_sweep_program_is_saved_and_a_later_process_reads_it(tmp_path, monkeyp
     scene = _scene()
     config = js.SolveConfig(solver="implicit_euler_fixed", dt0=0.01, n_save=5)
     ts = config.save_times(scene.t0, scene.t1)
-    getters = (js._fit.resolve(scene, "alpha"),)
+    getters = (resolve(scene, "alpha"),)
     args = ((ALPHAS[:2],), scene, getters, _default_fn, config, ts, 2)
     custom = args[:3] + (lambda traj, s: traj.end_mass,) + args[4:]
     _programs.set_program_folder(str(tmp_path))
@@ -252,7 +253,7 @@ def test_group_size_fits_the_free_memory():
     scene = _scene()
     config = js.SolveConfig(solver="bdf", n_save=5)
     ts = config.save_times(scene.t0, scene.t1)
-    getters = (js._fit.resolve(scene, "alpha"),)
+    getters = (resolve(scene, "alpha"),)
     vals = (np.linspace(0.005, 0.05, 64),)
     args = (vals, scene, getters, lambda traj, s: traj.end_mass, config, ts, 64)
     device = jax.devices()[0]

@@ -8,8 +8,8 @@ import optax
 import pytest
 
 import jaxstring as js
-from jaxstring import _fit
-from jaxstring._solve_config import make_adjoint
+from jaxstring import _fit, _parameters
+from jaxstring._adjoints import make_adjoint
 
 from .helpers import FORMULATIONS, assert_grad_matches_central_differences
 
@@ -116,10 +116,10 @@ def test_identify_alpha_and_EA_from_a_finer_string():
 
 def test_fit_freezes_other_leaves_and_rejects_bad_input():
     scene = js.string_pendulum(k=3, t1=0.1)
-    spec = _fit.filter_spec(scene, [_fit.resolve(scene, "alpha")])
+    spec = _parameters.filter_spec(scene, [_parameters.resolve(scene, "alpha")])
     assert sum(map(bool, __import__("jax").tree_util.tree_leaves(spec))) == 1
     with pytest.raises(ValueError, match="unknown parameter 'alfa'"):
-        _fit.resolve(scene, "alfa")
+        _parameters.resolve(scene, "alfa")
     with pytest.raises(ValueError, match="must be > 0"):
         _fit.fit(
             js.string_pendulum(k=3, t1=0.1, alpha=0.0),

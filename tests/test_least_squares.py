@@ -198,8 +198,8 @@ def test_bad_input_names_the_argument(kwargs, match):
 
 def test_experiments_of_one_structure_are_solved_in_one_vmap():
     from jaxstring import SolveConfig
-    from jaxstring._fit import resolve
     from jaxstring._least_squares import _Problem, _stack_scenes
+    from jaxstring._parameters import resolve
 
     a, b = _scene(), _scene(3 * np.pi / 8)
     assert _stack_scenes((a, b)) is not None

@@ -46,7 +46,6 @@ import dataclasses
 import math
 from typing import Any
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
@@ -59,6 +58,7 @@ from jaxtyping import Array
 
 from .._arrays import add_rows
 from .._jit import cpu_compiler_options
+from .._lazy import diffrax as dfx
 from .._scene import Scene, scene_vector_field
 
 

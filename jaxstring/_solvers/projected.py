@@ -60,3 +60,13 @@ class ProjectedSolver(dfx.AbstractAdaptiveSolver, dfx.AbstractWrappedSolver):
 
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)
+
+
+class ProjectedSolverAD(ProjectedSolver):
+    """`ProjectedSolver` for diffrax's ForwardMode and DirectAdjoint, which read
+    `solver.scan_kind` (the wrapped solver's, set by the caller before wrapping);
+    `ProjectedSolver` does not forward it."""
+
+    @property
+    def scan_kind(self):
+        return getattr(self.solver, "scan_kind", None)

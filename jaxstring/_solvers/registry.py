@@ -8,54 +8,14 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 
 from .._jit import traced_once
-from .._validate import check_choice
 from .bdf import BDF
 from .diffrax_compat import EVERY_STAGE
 from .esdirk import ESDIRK
 from .fixed_step import Newmark, ThetaMethod
+from .names import AUTO as AUTO, SOLVERS as SOLVERS
 from .rosenbrock import Rodas5P
 from .stage_newton import StageNewton
 
-
-# name -> (description, adaptive step size?, implicit?)
-SOLVERS = {
-    "kvaerno3": ("ESDIRK order 3(2), A-L stable", True, True),
-    "kvaerno4": ("ESDIRK order 4(3), A-L stable", True, True),
-    "kvaerno5": ("ESDIRK order 5(4), A-L stable", True, True),
-    "implicit_euler": (
-        "implicit Euler, adaptive (trapezoid error estimate)",
-        True,
-        True,
-    ),
-    "implicit_euler_fixed": (
-        "implicit Euler, fixed step dt0, full Newton",
-        False,
-        True,
-    ),
-    "rodas5p": (
-        "Rosenbrock-Wanner Rodas5P, order 5(4), one Jacobian per step",
-        True,
-        True,
-    ),
-    "theta": (
-        "theta-method, theta = 1/2 (the paper's), fixed step dt0, full Newton",
-        False,
-        True,
-    ),
-    "trapezoid": (
-        "trapezoidal rule (theta = 1/2), fixed step dt0, full Newton",
-        False,
-        True,
-    ),
-    "newmark": (
-        "Newmark gamma = 1/2, beta = 1/4 on (q, v), fixed step dt0, full Newton",
-        False,
-        True,
-    ),
-    "tsit5": ("explicit Tsitouras 5(4)", True, False),
-    "dopri5": ("explicit Dormand-Prince 5(4)", True, False),
-    "bdf": ("variable-order BDF/NDF 1-5, reused Jacobian (as CVODE)", True, True),
-}
 
 _MAX_ITERS_ADAPTIVE = 10
 
@@ -148,25 +108,6 @@ def kvaerno_class(name: str, scene):
     the scene's model asks (`SolverStructure.stage_jacobians`)."""
     per_stage = scene.structure.stage_jacobians
     return (KVAERNO if per_stage else KVAERNO_STEP_JACOBIAN)[name]
-
-
-AUTO = "auto"
-"""The solver name that stands for the measured choice for the scene's system (the
-solver of its "balanced" accuracy preset: `jaxstring.preset`)."""
-
-
-def check_solver(solver) -> None:
-    if isinstance(solver, dfx.AbstractSolver) or solver == AUTO:
-        return
-    check_choice("solver", solver, tuple(SOLVERS) + (AUTO,))
-
-
-def is_adaptive(solver) -> bool:
-    if isinstance(solver, dfx.AbstractSolver):
-        return isinstance(solver, dfx.AbstractAdaptiveSolver)
-    if solver == AUTO:  # every preset's solver is adaptive
-        return True
-    return SOLVERS[solver][1]
 
 
 def build_solver(solver, newton_rtol, newton_atol, scene, differentiable=True):

@@ -26,6 +26,7 @@ import jax.tree_util as jtu
 import optimistix as optx
 
 from .esdirk import ESDIRK
+from .names import STEP_CONTROLS as STEP_CONTROLS
 from .rosenbrock import Rodas5P
 
 
@@ -89,7 +90,6 @@ class NewtonLimitedController(dfx.AbstractAdaptiveStepSizeController):
 NEWTON_STAGE_SOLVERS = ("kvaerno3", "kvaerno4", "kvaerno5", "implicit_euler")
 
 
-STEP_CONTROLS = ("auto", "pid", "newton-limited")
 # The largest step growth factor of Rodas5P's controller under step_control="auto".
 ROSENBROCK_FACTORMAX = 3.0
 

@@ -168,7 +168,7 @@ for _name, _fn, _help in (
 
 
 def _common_arguments(p: argparse.ArgumentParser, solver: str = "kvaerno5") -> None:
-    from .._solvers.registry import SOLVERS
+    from .._solvers.names import SOLVERS
 
     p.add_argument(
         "--solver", choices=tuple(SOLVERS), default=solver, help="ODE solver"

@@ -25,12 +25,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .. import _programs
 from .._arrays import host_op
 from .._blas import single_blas_thread
 from .._jit import cpu_jit
+from .._lazy import optimistix as optx
 from .._scene import Scene
 from .vessels import Hawser, Tandem, hull_clearance, rot, wrap
 
@@ -106,9 +106,9 @@ def _linearised(scene, q, full):
 # (rejected steps near the root), so for them a solve counts as converged by its
 # residual alone.
 _METHODS = {
-    "newton": (optx.Newton, True),
-    "dogleg": (optx.Dogleg, False),
-    "lm": (optx.LevenbergMarquardt, False),
+    "newton": ("Newton", True),
+    "dogleg": ("Dogleg", False),
+    "lm": ("LevenbergMarquardt", False),
 }
 
 
@@ -168,7 +168,8 @@ def _newton_batch(scene, q0s, rtol, atol, max_steps, jacobian=None):
 def _solve_batch_body(scene, q0s, rtol, atol, max_steps, method="newton"):
     if method == "newton":
         return _newton_batch(scene, q0s, rtol, atol, max_steps)[:3]
-    cls, use_flag = _METHODS[method]
+    name, use_flag = _METHODS[method]
+    cls = getattr(optx, name)
     solver = cls(rtol=rtol, atol=atol)
 
     def one(q0):

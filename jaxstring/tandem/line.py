@@ -29,9 +29,9 @@ from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .._jit import cpu_jit
+from .._lazy import optimistix as optx
 from .._model import AbstractModel
 from .._programs import eager_jit
 from .._validate import check_finite, check_int, check_positive
