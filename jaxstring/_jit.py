@@ -38,7 +38,6 @@ import threading
 import time
 import types
 
-import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
@@ -253,6 +252,10 @@ class _Static:
 def split_arrays(tree):
     """(the array leaves of `tree`, a `_Static` of the rest): what `eqx.partition`
     with `eqx.is_array` separates, in one flattening."""
+    # (equinox imported here: a sweep's worker process imports this module for
+    # its compiler options and needs nothing of equinox)
+    import equinox as eqx
+
     leaves, treedef = jtu.tree_flatten(tree)
     is_array = tuple(eqx.is_array(x) for x in leaves)
     arrays = [x for x, a in zip(leaves, is_array) if a]
@@ -407,4 +410,6 @@ def traced_once(step):
     structure is not traced again, so the step (stages, Newton iterations,
     Jacobians) is traced once. The compiled program computes the same: the
     inlined trace is the one that would have been made."""
+    import equinox as eqx
+
     return eqx.filter_jit(step, inline=True)
