@@ -78,6 +78,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from . import _distribute
+from ._arrays import as_array
 from ._blas import single_blas_thread
 from ._integrate import integrate, solve
 from ._jit import cpu_jit
@@ -497,7 +498,7 @@ def _check_members(scene, getters, arrays, grid, shape):
             member = eqx.tree_at(
                 lambda n: [_follow(n, r) for r in rel],
                 node,
-                [jnp.asarray(v, dtype=d) for v, d in zip(vals, dtypes)],
+                [as_array(v, d) for v, d in zip(vals, dtypes)],
             )
             try:
                 for check in checks:

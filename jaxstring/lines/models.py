@@ -1610,7 +1610,7 @@ def initial_shape(model: LineNetwork, effects=(), env=None, t0=0.0):
     **Returns:** state `(n, 6)`."""
     env = Environment() if env is None else env
     top = model.topology
-    t0 = jnp.asarray(t0, jnp.float64)
+    t0 = f64(t0)
     hp, ends, L = (np.asarray(a) for a in _start_geometry(model, t0))
     pos = np.zeros((top.n_state, 3))
     pts = []
@@ -1839,7 +1839,7 @@ def equilibrium(
     x0 = host_op(lambda xp, y: y[:, :3], y0)
     if isinstance(x0, jax.core.Tracer):
         x0 = jax.lax.stop_gradient(x0)
-    t0 = jnp.asarray(t0, jnp.float64)
+    t0 = f64(t0)
     # a later process skips tracing the solve (`jaxstring._programs`)
     x, res, it, ftol, (ta, tb) = _programs.call_or_jit(
         _solve_equilibrium_body,

@@ -83,7 +83,8 @@ class AbstractString(AbstractModel):
         return y
 
     def state_shape(self):
-        # the shape alone: nothing is computed (or compiled)
+        # the shape alone: nothing is computed (or compiled); the formulations
+        # give it without tracing `initial_state`
         return jax.eval_shape(self.initial_state, 0.0).shape
 
     @property
@@ -215,6 +216,9 @@ class DisplacementString(AbstractString):
 
     formulation: ClassVar[str] = "displacement"
     projects: ClassVar[bool] = False
+
+    def state_shape(self):
+        return (self.k, 2 * self.dim)
 
     def initial_state(self, theta0):
         s = jnp.arange(1, self.k + 1) * (self.l / self.k)
@@ -439,6 +443,9 @@ class NaturalTangentString(_AbstractNaturalString):
         d = self.dim
         return y[:, 0], y[:, 1 : 1 + d], y[:, 1 + d], y[:, 2 + d :]
 
+    def state_shape(self):
+        return (self.k + 1, 2 + 2 * self.dim)
+
     def initial_state(self, theta0):
         n = self.k + 1
         t = jnp.broadcast_to(direction(theta0, self.dim), (n, self.dim))
@@ -515,6 +522,9 @@ class NaturalAngleString(_AbstractNaturalString):
                 "`dim` must be 2 for the angle formulation; use formulation="
                 f"'natural' for 3D (got dim={self.dim!r})."
             )
+
+    def state_shape(self):
+        return (self.k + 1, 4)
 
     def initial_state(self, theta0):
         n = self.k + 1

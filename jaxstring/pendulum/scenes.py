@@ -2,8 +2,7 @@
 
 import math
 
-import jax.numpy as jnp
-
+from .._arrays import f64
 from .._environment import Environment, G
 from .._programs import eager_jit
 from .._scene import Scene
@@ -98,7 +97,7 @@ def string_pendulum(
             built.append(e)
     model = FORMULATIONS[formulation](l=l, mu=mu, m_s=m_s, EA=EA, k=k, dim=dim)
     if y0 is None:
-        y0 = _initial_state(model, jnp.asarray(theta0, dtype=jnp.float64))
+        y0 = _initial_state(model, f64(theta0))
     else:
         check_finite("y0", y0)
     return Scene(

@@ -188,7 +188,7 @@ def _check_dynamic(mooring, **refused):
 
 def _perturb_shuttle_heading(model, y, angle):
     """Turn the shuttle by `angle` (rad) about its bow fairlead."""
-    return _turn_shuttle(model, y, jnp.asarray(angle, jnp.float64))
+    return _turn_shuttle(model, y, f64(angle))
 
 
 @eager_jit(tiered=True)

@@ -52,7 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from .._arrays import FloatScalar, dot as _dot, param as _param
+from .._arrays import FloatScalar, dot as _dot, f64, param as _param
 from .._model import AbstractModel, SolverStructure
 from .._programs import eager_jit
 from .._validate import (
@@ -746,7 +746,7 @@ def _mounts(model, t0):
 def _rest_geometry(model, t0):
     """(target lengths of the links, root mount position, running-end mount
     position) at `t0`, as NumPy arrays."""
-    g, a, b = (np.asarray(x) for x in _mounts(model, jnp.asarray(t0, jnp.float64)))
+    g, a, b = (np.asarray(x) for x in _mounts(model, f64(t0)))
     return g[: model.n_links], a, b
 
 
