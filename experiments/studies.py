@@ -755,7 +755,7 @@ STUDIES = (
         ),
         (
             Run((), _files("first_result")),
-            Run(("--ref", "1b106b1", "--rounds", "2"), _files("first_result_ref")),
+            Run(("--ref", "405d7b2", "--rounds", "2"), _files("first_result_ref")),
         ),
     ),
     Study(

@@ -1,7 +1,7 @@
 """Modules imported where they are first used.
 
 diffrax and optimistix (with lineax) take longer to import than a small solve
-takes to run (docs/performance.md, "A warm process runs the saved executable"),
+takes to run (docs/performance.md, "A warm process imports only what it runs"),
 and a process that runs saved programs (`jaxstring._programs`) neither traces
 nor builds a solver: the modules it passes through name them as `diffrax` and
 `optimistix` below, imported at the first attribute read. Modules that subclass
