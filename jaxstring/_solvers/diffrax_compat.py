@@ -8,8 +8,8 @@ document as public:
 2. The argument tuple diffrax hands the root finder of an implicit Runge-Kutta
    stage (`stage_arguments`): the banded stage Newton measures its increments in
    the units of the state and builds the stage Jacobian from the model's own.
-3. `RESULTS._index_to_message` and the `_value` of a result (`result_message`,
-   `code_message`, `result_code`): the integer code and text of a failure.
+3. `RESULTS._index_to_message` and the `_value` of a result (`code_message`,
+   `result_code`): the integer code and text of a failure.
 4. `diffeqsolve`'s run-time checks of the save times and of the step's direction
    (`equinox.internal.error_if` with three messages of `diffrax._integrate`):
    jaxstring checks both before it traces a solve, and `save_times_checked` leaves
@@ -32,7 +32,6 @@ from typing import Any, NamedTuple
 
 import diffrax as dfx
 import equinox.internal as eqxi
-import jax
 
 from .._config import NAN_CHECKS_CONTEXT
 
@@ -72,22 +71,10 @@ def result_code(result):
     return result._value
 
 
-def result_from_code(code):
-    """The diffrax result of an integer result code (the inverse of `result_code`)."""
-    return jax.tree_util.tree_unflatten(
-        jax.tree_util.tree_structure(dfx.RESULTS.successful), [code]
-    )
-
-
 def code_message(code: int) -> str:
     """'success' or diffrax's message for an integer result code."""
     message = dfx.RESULTS._index_to_message[int(code)]
     return message or ("success" if code == 0 else "failure")
-
-
-def result_message(result) -> str:
-    """'success' or diffrax's message for a diffrax result."""
-    return code_message(int(result_code(result)))
 
 
 class StageArguments(NamedTuple):
