@@ -77,7 +77,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from . import _distribute
+from . import _distribute, _programs
 from ._arrays import as_array
 from ._blas import single_blas_thread
 from ._integrate import integrate, solve
@@ -572,7 +572,10 @@ def _on_devices(local, arrays, mine, scene, getters, fn, config, ts, batch_size,
             local, vals, scene, getters, fn, config, ts, batch_size, devices
         )
     else:
-        out = local(vals, scene, getters, fn, config, ts, batch_size)
+        # a later process runs the saved program without tracing it
+        # (`jaxstring._programs`), as the worker processes run the chunk program
+        args = (vals, scene, getters, fn, config, ts, batch_size)
+        out = _programs.call_or_jit(local, local, *args)
     out = jax.block_until_ready(out)
     # Each member's position in the padded batch: its first occurrence.
     where = np.empty(m, dtype=np.int64)

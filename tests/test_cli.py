@@ -421,17 +421,20 @@ import numpy as np
 import jaxstring as js
 scene = js.pendulum.string_pendulum(k=6, EA=1e4, t1=0.3)
 traj = js.simulate(scene)
+swept = js.sweep(scene, {"alpha": [0.01, 0.04]}, processes=1, n_save=4)
 print(json.dumps({"end": np.asarray(traj.end_mass[-1]).tolist(), "ok": traj.ok,
                   "status": traj.status,
+                  "swept": swept.out["positions"][:, -1, -1].tolist(),
+                  "swept_ok": bool(swept.ok.all()),
                   "imported": [m for m in ("diffrax", "optimistix", "lineax")
                                if m in sys.modules]}))
 """
 
 
 def test_a_later_process_runs_a_saved_solve_without_importing_diffrax(tmp_path):
-    # A process that runs a saved solve neither traces nor builds a solver, so it
-    # imports neither diffrax nor optimistix (`jaxstring._lazy`); the first
-    # process, which traces the solve, does.
+    # A process that runs a saved solve or sweep neither traces nor builds a
+    # solver, so it imports neither diffrax nor optimistix (`jaxstring._lazy`);
+    # the first process, which traces them, does.
     import json
     import os
     import subprocess
@@ -459,5 +462,10 @@ def test_a_later_process_runs_a_saved_solve_without_importing_diffrax(tmp_path):
     assert second["imported"] == []
     assert first["ok"] and second["ok"] and second["status"] == "success"
     assert second["end"] == first["end"]
-    # released from the horizontal, the end mass first falls freely: g t^2 / 2
-    np.testing.assert_allclose(first["end"][1], -0.5 * 9.81 * 0.3**2, rtol=1e-2)
+    assert first["swept_ok"] and second["swept_ok"]
+    assert second["swept"] == first["swept"]
+    # released from the horizontal, the end mass first falls freely: g t^2 / 2,
+    # whatever the string's damping
+    fall = -0.5 * 9.81 * 0.3**2
+    np.testing.assert_allclose(first["end"][1], fall, rtol=1e-2)
+    np.testing.assert_allclose(np.array(first["swept"])[:, 1], fall, rtol=1e-2)
