@@ -73,6 +73,12 @@ CASES = {
         "solver='implicit_euler_fixed', dt0=0.005, batch_size=16)",
     ),
 }
+# Not a README example: a sweep whose chunks run long enough in the workers to pay
+# for starting them (the default scene, 64 members, the sweep's defaults).
+CASES["sweep_default_pendulum"] = (
+    "import numpy as np; scene = js.pendulum.string_pendulum()",
+    "res = js.sweep(scene, {'alpha': np.linspace(0.005, 0.05, 64)})",
+)
 # The MoorDyn deck again, read and solved for its static state in the setup, so
 # that the first call is the simulate alone, with each solver choice.
 _WD0050 = (

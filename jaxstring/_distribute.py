@@ -30,15 +30,17 @@ import hashlib
 import math
 import multiprocessing
 import os
+import pathlib
 import pickle
 import sys
+import time
 
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
 
-from . import _programs, _worker
+from . import _executables as executables, _programs, _worker
 from ._jit import cpu_compiler_options
 from ._validate import check_int
 
@@ -217,19 +219,100 @@ def shutdown_pool() -> None:
 atexit.register(shutdown_pool)
 
 
-def run_chunks(executor, key, program, chunks, own_pool):
+def run_chunks(executor, key, program, chunks, own_pool, timed=None):
     """Run the exported `program` on each chunk's leaves in `executor`: a list with
-    each chunk's outputs, or the text of its failure (`run_tasks`)."""
-    return run_tasks(executor, [(key, program, c) for c in chunks], own_pool)
+    each chunk's outputs, or the text of its failure (`run_tasks`). `timed`: a
+    saved program's key under which the chunks' median run time in a worker is
+    kept for the next sweep (`short_here`)."""
+    tasks = [(key, program, c) for c in chunks]
+    if timed is None:
+        return run_tasks(executor, tasks, own_pool)
+    results = run_tasks(executor, tasks, own_pool, run=_worker.run_timed)
+    _record_seconds(timed, [r[1] for r in results if not isinstance(r, str)])
+    return [r if isinstance(r, str) else r[0] for r in results]
 
 
-def run_tasks(executor, tasks, own_pool):
-    """Run each task `(key, exported program, leaves)` in `executor`: a list with
-    each task's outputs, or the text of its failure. A worker that dies breaks a
-    process pool and every task in flight with it, so the lost tasks are run
-    again in parallel once, and those lost again one at a time: a task fails only
-    when it fails on its own. jaxstring's own pool (`own_pool`) is started afresh
-    after a break; a user's executor is used as it is."""
+WORKER_START_S = 1.5
+"""What starting jaxstring's pool costs a sweep before its workers run: each
+spawned worker imports JAX and reads the program's executable (about 1.1-1.3 s
+on an idle 2-core machine: docs/performance.md, "Sweeps on every core and every
+GPU")."""
+
+
+def pool_pays(run_s: float, workers: int) -> bool:
+    """Whether chunks that ran `run_s` seconds one after the other in a pool's
+    worker are worth starting a pool of `workers` for: whether they run longer than
+    the pool takes to start. (A pool started now ends them after about
+    `WORKER_START_S` + `run_s / workers`; this process, not bound to a core as a
+    worker is, ran them 1.15-1.35 times slower than a worker, so their break-even
+    lies near `WORKER_START_S` for two workers and below it for more.)"""
+    return workers > 1 and run_s > WORKER_START_S
+
+
+_RUN_HERE = {"s": 0.0}  # seconds of chunks this process ran in place of a pool
+
+
+def _seconds_path(saved_key: str):
+    folder = _worker.folder()
+    if folder is None:
+        return None
+    machine = executables.machine(_worker.pool_flags())
+    return pathlib.Path(folder) / f"{saved_key}.{machine}.chunk_seconds"
+
+
+def _record_seconds(saved_key: str, seconds: list) -> None:
+    target = _seconds_path(saved_key)
+    if target is None or not seconds:
+        return
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(repr(float(np.median(seconds))))
+        os.replace(tmp, target)
+    except OSError:
+        pass  # not kept: the next sweep goes to the pool
+
+
+def short_here(saved_key: str | None, n_chunks: int, workers: int) -> bool:
+    """Whether `n_chunks` chunks of the saved program `saved_key` ran so shortly in
+    an earlier pool's worker that this process had better run them than start a
+    pool of `workers` (`pool_pays`; the chunks run here by earlier sweeps count
+    too, so that a loop of short sweeps starts the pool once they add up)."""
+    target = None if saved_key is None else _seconds_path(saved_key)
+    try:
+        seconds = float(target.read_text())
+    except (AttributeError, OSError, ValueError):
+        return False
+    return not pool_pays(n_chunks * seconds + _RUN_HERE["s"], workers)
+
+
+def run_here(key: str, chunks: list):
+    """The chunks of program `key` run in this process, one after the other, on the
+    executable a pool's worker saved: a list as `run_chunks` gives it; None where
+    there is no such executable."""
+    compiled = executables.read(_worker.folder(), key, "full", _worker.pool_flags())
+    if compiled is None:
+        return None
+    out = []
+    start = time.perf_counter()
+    for leaves in chunks:
+        try:
+            out.append(jax.device_get(compiled(*leaves)))
+        except Exception as error:  # noqa: BLE001  (reported as the chunk's failure)
+            out.append(f"{type(error).__name__}: {error}")
+    _RUN_HERE["s"] += time.perf_counter() - start
+    return out
+
+
+def run_tasks(executor, tasks, own_pool, run=None):
+    """Run each task `(key, exported program, leaves)` in `executor` (by `run`,
+    default `_worker.run`): a list with each task's outputs, or the text of its
+    failure. A worker that dies breaks a process pool and every task in flight
+    with it, so the lost tasks are run again in parallel once, and those lost
+    again one at a time: a task fails only when it fails on its own. jaxstring's
+    own pool (`own_pool`) is started afresh after a break; a user's executor is
+    used as it is."""
+    run = _worker.run if run is None else run
     results = [None] * len(tasks)
 
     def attempt(todo):
@@ -238,7 +321,7 @@ def run_tasks(executor, tasks, own_pool):
             workers = _POOL["workers"]
             shutdown_pool()
             executor = process_pool(workers)
-        submit = lambda i: executor.submit(_worker.run, *tasks[i])
+        submit = lambda i: executor.submit(run, *tasks[i])
         with _main_not_rerun() if own_pool else contextlib.nullcontext():
             futures = {submit(i): i for i in todo}
         lost = []
@@ -259,12 +342,15 @@ def run_tasks(executor, tasks, own_pool):
     return results
 
 
-def local_run(executor, workers, fn, args, n_vals, chunk):
+def local_run(executor, workers, fn, args, n_vals, chunk, adaptive=False):
     """The members `args[0]` (a tuple of value arrays, `(n,)` each) in chunks of
     `chunk`, each chunk `fn(chunk values, *args[1:])`, in `executor` (None:
-    jaxstring's pool of `workers`). Returns (outputs, failed) with every leaf of the
-    outputs `(n, ...)` in member order, and `failed` a dict member index -> reason
-    for members whose chunk failed (their outputs NaN or zero)."""
+    jaxstring's pool of `workers`). Returns (outputs, failed, workers used) with
+    every leaf of the outputs `(n, ...)` in member order, and `failed` a dict
+    member index -> reason for members whose chunk failed (their outputs NaN or
+    zero). `adaptive` (jaxstring's pool only): where the pool is not running and
+    an earlier pool ran the saved program too shortly to pay for starting one,
+    this process runs the chunks (`short_here`, `run_here`; 1 worker used)."""
     vals = args[0]
     n = vals[0].shape[0]
     n_chunks = math.ceil(n / chunk)
@@ -273,15 +359,24 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
     parts = [
         tuple(v[i * chunk : (i + 1) * chunk] for v in padded) for i in range(n_chunks)
     ]
-    if executor is None:  # its workers start while this process traces
+    own = executor is None
+    first = (parts[0],) + tuple(args[1:])
+    # Decided before the program is read, so that a pool starts while this
+    # process reads or traces it.
+    saved = _programs.saved_key(fn, first) if own else None
+    here = adaptive and own and _POOL["workers"] != workers
+    here = here and short_here(saved, n_chunks, workers)
+    if own and not here:
         process_pool(workers)
-    key, program, leaves, outputs = export_chunk(fn, (parts[0],) + tuple(args[1:]))
+    key, program, leaves, outputs = export_chunk(fn, first)
     shared = [np.asarray(x) for x in leaves[n_vals:]]
     chunks = [[np.asarray(v) for v in p] + shared for p in parts]
-    own = executor is None
-    results = run_chunks(
-        process_pool(workers) if own else executor, key, program, chunks, own
-    )
+    results = run_here(key, chunks) if here else None
+    used = workers if results is None else 1
+    if results is None:
+        pool = process_pool(workers) if own else executor
+        timed = (saved or _programs.saved_key(fn, first)) if own else None
+        results = run_chunks(pool, key, program, chunks, own, timed=timed)
     failed = {}
     out = []
     for i, r in enumerate(results):
@@ -291,7 +386,7 @@ def local_run(executor, workers, fn, args, n_vals, chunk):
             r = jtu.tree_map(_failed_like, outputs)
         out.append(r)
     merged = jtu.tree_map(lambda *xs: np.concatenate(xs)[:n], *out)
-    return merged, failed
+    return merged, failed, used
 
 
 class ExperimentPrograms:

@@ -56,16 +56,17 @@ def uses_lapack(exported) -> bool:
 
 
 @functools.cache
-def machine() -> str:
+def machine(flags: str | None = None) -> str:
     """What an executable compiled here is keyed by besides its program: XLA's
-    CPU client (its version), the CPU devices, the XLA flags, the processor (its
-    model and instruction-set flags: XLA:CPU compiles for the host's)."""
+    CPU client (its version), the CPU devices, the XLA flags (`flags`; None:
+    this process's), the processor (its model and instruction-set flags: XLA:CPU
+    compiles for the host's)."""
     cpu = jax.devices("cpu")
     h = hashlib.sha256()
     for part in (
         cpu[0].client.platform_version,
         str(len(cpu)),
-        os.environ.get("XLA_FLAGS", ""),
+        os.environ.get("XLA_FLAGS", "") if flags is None else flags,
         platform.machine(),
         platform.processor(),
         _processor(),
@@ -87,18 +88,19 @@ def _processor() -> str:
     return "\n".join(line for line in first if line.startswith(wanted))
 
 
-def path(folder, key: str, tier: str) -> pathlib.Path:
-    """Where the executable of program `key` compiled on this machine is saved."""
-    return pathlib.Path(folder) / f"{key}.{machine()}.{tier}.executable"
+def path(folder, key: str, tier: str, flags: str | None = None) -> pathlib.Path:
+    """Where the executable of program `key` compiled on this machine is saved
+    (by a process with the XLA flags `flags`; None: this process's)."""
+    return pathlib.Path(folder) / f"{key}.{machine(flags)}.{tier}.executable"
 
 
-def read(folder, key: str, tier: str):
-    """The executable of `key` saved by a process on this machine, loaded for the
-    first CPU device; None where there is none or it cannot be loaded (then it
-    is compiled again)."""
+def read(folder, key: str, tier: str, flags: str | None = None):
+    """The executable of `key` saved by a process on this machine (with the XLA
+    flags `flags`; None: this process's), loaded for the first CPU device; None
+    where there is none or it cannot be loaded (then it is compiled again)."""
     try:
         payload, in_tree, out_tree, lapack = pickle.loads(
-            path(folder, key, tier).read_bytes()
+            path(folder, key, tier, flags).read_bytes()
         )
         if lapack:
             _lapack_ready()

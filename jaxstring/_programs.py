@@ -383,6 +383,18 @@ def call_or_jit(fn, jitted, *args, tiered: bool = False):
     return jitted(*args) if out is None else out
 
 
+def saved_key(fn, args) -> str | None:
+    """The key of the traced program of `fn(*args)` where it is in the program
+    folder (a process that reads it traces nothing), else None."""
+    folder = program_folder()
+    if folder is None:
+        return None
+    key = _key(fn, args)[0]
+    if key is None or not (pathlib.Path(folder) / f"{key}.program").exists():
+        return None
+    return key
+
+
 def saved_export(fn, static, treedef, leaves):
     """`fn` traced and exported for arrays of the shapes and dtypes of `leaves`
     (the arrays of its arguments; `static` and `treedef` the rest): read from the

@@ -852,6 +852,7 @@ def sweep(
         start, block = _distribute.process_block(n, group)
     mine = perm[start : start + block]
     workers = _workers(processes, executor, len(mine))
+    ran = {"processes": workers if executor is None else 0}
 
     def run(local):
         if len(mine) == 0:
@@ -866,9 +867,13 @@ def sweep(
             per = len(mine) / (4 * workers if executor is None else 8)
             chunk = math.ceil(max(1, math.ceil(per)) / group) * group
             args = (tuple(a[mine] for a in arrays), scene, getters, fn, config, ts)
-            out, failed = _distribute.local_run(
-                executor, workers, local, args + (group,), len(arrays), chunk
-            )
+            # with "auto", chunks that ran shortly in an earlier pool run here
+            out, failed, used = _distribute.local_run(
+                executor, workers, local, args + (group,), len(arrays), chunk,
+                adaptive=processes == "auto",
+            )  # fmt: skip
+            if executor is None:
+                ran["processes"] = used
             return out, failed, 1
         out, n_dev = _on_devices(local, arrays, mine, scene, getters, fn, config, ts,
                                  group, devices, order)  # fmt: skip
@@ -913,5 +918,5 @@ def sweep(
         n_devices=n_dev,
         time=elapsed,
         mode=used,
-        processes=workers if executor is None else 0,
+        processes=ran["processes"],
     )

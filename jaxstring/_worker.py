@@ -22,6 +22,7 @@ compilation took about 1.5 times as long) and binds them to its core again to ru
 import contextlib
 import os
 import pickle
+import time
 
 
 _COMPILED = {}  # program key -> compiled call, per worker process
@@ -127,11 +128,33 @@ def ready() -> tuple:
     return os.getpid(), cores
 
 
+def pool_flags() -> str:
+    """The XLA flags of a worker that this process starts (`init`)."""
+    from ._config import whole_loop_flags
+
+    return whole_loop_flags(os.environ.get("XLA_FLAGS"))
+
+
+def folder() -> str | None:
+    """Where workers save the executables of their programs: the compilation
+    cache's `programs` folder (None: no cache)."""
+    import jax
+
+    cache_dir = jax.config.jax_compilation_cache_dir
+    return os.path.join(cache_dir, "programs") if cache_dir else None
+
+
 def run(key: str, program: bytes, leaves: list):
     """The pickled exported `program` (named `key`) applied to `leaves` (NumPy
     arrays); its outputs as NumPy arrays. With a compilation cache, the program's
     executable is read from its `programs` folder where a worker on this machine
     saved it, else compiled (`_compile`) and saved there (`jaxstring._executables`)."""
+    return run_timed(key, program, leaves)[0]
+
+
+def run_timed(key: str, program: bytes, leaves: list):
+    """`run`'s outputs, and the seconds the compiled program ran for them (its
+    compilation or loading apart)."""
     import jax
 
     from . import _executables as executables
@@ -161,4 +184,6 @@ def run(key: str, program: bytes, leaves: list):
                 compiler=lambda lowered: _compile(lowered, key, cache_dir),
             )
         _COMPILED[key] = compiled
-    return jax.device_get(compiled(*leaves))
+    start = time.perf_counter()
+    out = jax.device_get(compiled(*leaves))
+    return out, time.perf_counter() - start

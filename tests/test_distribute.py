@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import jaxstring as js
-from jaxstring import _distribute
+from jaxstring import _distribute, _sweep as sweep_module
 from jaxstring._parameters import resolve
 
 from .helpers import KillingPool, run_distributed
@@ -61,6 +61,39 @@ def test_two_worker_processes_give_the_one_process_results(one_process):
     # In another order the members come back where they were given.
     both = _sweep(processes=2, order="sort")
     _same(one_process, both)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_distribute.host_cores() < 2, reason="one core: no workers")
+def test_an_auto_sweep_that_ran_briefly_in_a_pool_runs_here_next(
+    one_process, tmp_path, monkeypatch
+):
+    # "auto" sends a sweep of enough members to a pool, a worker per core, whose
+    # workers keep the chunks' run time beside their executable. Where the chunks
+    # ran for less than a pool takes to start (milliseconds here), a process with
+    # no pool running (a later one) runs them itself on that executable.
+    from jaxstring import _programs
+
+    monkeypatch.setattr(sweep_module, "AUTO_MEMBERS_PER_CORE", 1)
+    monkeypatch.setitem(_distribute._RUN_HERE, "s", 0.0)
+    monkeypatch.setattr(_distribute, "_EXPORTED", {})  # saved in the folder anew
+    pool = dict(_distribute._POOL)
+    _distribute._POOL.update(executor=None, workers=0)
+    _programs.set_program_folder(str(tmp_path))
+    try:
+        pooled = _sweep(processes="auto")
+        _distribute.shutdown_pool()
+        here = _sweep(processes="auto")
+        started = _distribute._POOL["executor"] is not None
+    finally:
+        _programs.set_program_folder(None)
+        _distribute.shutdown_pool()
+        _distribute._POOL.update(pool)
+    assert pooled.processes == _distribute.host_cores()
+    assert here.processes == 1 and not started
+    for res in (pooled, here):
+        assert res.ok.all()
+        _same(one_process, res)
 
 
 def _kill_chunk(value, times):
