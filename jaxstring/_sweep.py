@@ -690,8 +690,11 @@ def sweep(
       after the other (use `processes` for the cores of a CPU host).
     - `processes`: `"auto"` (default: every core of a CPU host when there are at
       least `AUTO_MEMBERS_PER_CORE` members per core, else this process alone; on
-      a GPU host the GPUs), or the number of worker processes: the members go in
-      chunks to jaxstring's own pool of spawned processes (kept for later sweeps),
+      a GPU host the GPUs; where the pool is not running and its workers ran this
+      program's chunks for less than they take to start, this process runs them:
+      `jaxstring._distribute.short_here`), or the number of worker processes:
+      the members go in chunks to jaxstring's own pool of spawned processes (kept
+      for later sweeps),
       which run the program this process traced once (`jaxstring._distribute`).
       A pool with one worker per core of this process binds each worker to a
       core of its own (docs/performance.md, "Sweeps on every core and every
