@@ -19,7 +19,7 @@ With ``--ref COMMIT [--rounds N]`` the cases (default: the README's) run for thi
 tree and for the commit (checked out into a temporary git worktree) in interleaved
 rounds, cold then warm for each, and results/first_result_ref.{md,csv} give the
 medians over the rounds side by side: what a change did to the first result, on
-one machine at one time.
+one machine at one time (``--name`` another results name for the table).
 """
 
 import argparse
@@ -194,7 +194,7 @@ def command(env, cache):
 README_CASES = [name for name in CASES if name.startswith("readme_")]
 
 
-def compare(ref, rounds=3, only=None):
+def compare(ref, rounds=3, only=None, name="first_result_ref"):
     """This tree against `ref`: each case cold then warm, per code per round."""
     names = only or README_CASES
     root = pathlib.Path(HERE).parent
@@ -221,7 +221,7 @@ def compare(ref, rounds=3, only=None):
         for (name, state, code), rs in got.items()
     ]
     common.write_table(
-        "first_result_ref",
+        name,
         rows,
         ["case", "cache", "code", *keys, "rounds"],
         f"Time to the first result: this tree against {ref[:10]}",
@@ -286,8 +286,11 @@ if __name__ == "__main__":
     p.add_argument("--only", nargs="*", default=None)
     p.add_argument("--ref", default=None, help="a commit to compare against")
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument(
+        "--name", default="first_result_ref", help="the --ref table's results name"
+    )
     a = p.parse_args()
     if a.ref:
-        compare(a.ref, a.rounds, a.only)
+        compare(a.ref, a.rounds, a.only, a.name)
     else:
         main(quick=a.quick, only=a.only)

@@ -756,6 +756,20 @@ STUDIES = (
         (
             Run((), _files("first_result")),
             Run(("--ref", "405d7b2", "--rounds", "2"), _files("first_result_ref")),
+            Run(
+                (
+                    "--ref",
+                    "e67f451",
+                    "--rounds",
+                    "3",
+                    "--only",
+                    "readme_sweep",
+                    "sweep_default_pendulum",
+                    "--name",
+                    "first_result_ref_sweep",
+                ),
+                _files("first_result_ref_sweep"),
+            ),
         ),
     ),
     Study(
