@@ -194,7 +194,7 @@ def command(env, cache):
 README_CASES = [name for name in CASES if name.startswith("readme_")]
 
 
-def compare(ref, rounds=3, only=None, name="first_result_ref"):
+def compare(ref, rounds=3, only=None, table="first_result_ref"):
     """This tree against `ref`: each case cold then warm, per code per round."""
     names = only or README_CASES
     root = pathlib.Path(HERE).parent
@@ -221,7 +221,7 @@ def compare(ref, rounds=3, only=None, name="first_result_ref"):
         for (name, state, code), rs in got.items()
     ]
     common.write_table(
-        name,
+        table,
         rows,
         ["case", "cache", "code", *keys, "rounds"],
         f"Time to the first result: this tree against {ref[:10]}",
