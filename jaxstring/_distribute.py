@@ -233,10 +233,9 @@ def run_chunks(executor, key, program, chunks, own_pool, timed=None):
 
 
 WORKER_START_S = 1.5
-"""What starting jaxstring's pool costs a sweep before its workers run: each
-spawned worker imports JAX and reads the program's executable (about 1.1-1.3 s
-on an idle 2-core machine: docs/performance.md, "Sweeps on every core and every
-GPU")."""
+"""What starting jaxstring's pool costs a sweep before its workers run, in
+seconds: each spawned worker imports JAX and reads the program's executable
+(measured in docs/performance.md, "Sweeps on every core and every GPU")."""
 
 
 def pool_pays(run_s: float, workers: int) -> bool:
@@ -244,8 +243,9 @@ def pool_pays(run_s: float, workers: int) -> bool:
     worker are worth starting a pool of `workers` for: whether they run longer than
     the pool takes to start. (A pool started now ends them after about
     `WORKER_START_S` + `run_s / workers`; this process, not bound to a core as a
-    worker is, ran them 1.15-1.35 times slower than a worker, so their break-even
-    lies near `WORKER_START_S` for two workers and below it for more.)"""
+    worker is, runs them slower than a worker does, so their break-even lies near
+    `WORKER_START_S` for two workers and below it for more: docs/performance.md,
+    "Sweeps on every core and every GPU".)"""
     return workers > 1 and run_s > WORKER_START_S
 
 
