@@ -694,8 +694,8 @@ def sweep(
       program's chunks for less than they take to start, this process runs them:
       `jaxstring._distribute.short_here`), or the number of worker processes:
       the members go in chunks to jaxstring's own pool of spawned processes (kept
-      for later sweeps),
-      which run the program this process traced once (`jaxstring._distribute`).
+      for later sweeps), which run the program this process traced once
+      (`jaxstring._distribute`).
       A pool with one worker per core of this process binds each worker to a
       core of its own (docs/performance.md, "Sweeps on every core and every
       GPU").

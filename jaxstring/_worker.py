@@ -164,20 +164,20 @@ def run_timed(key: str, program: bytes, leaves: list):
     compiled = _COMPILED.get(key)
     if compiled is None:
         cache_dir = jax.config.jax_compilation_cache_dir
-        folder = os.path.join(cache_dir, "programs") if cache_dir else None
-        if folder is not None:
-            compiled = executables.read(folder, key, "full")
+        saved = folder()
+        if saved is not None:
+            compiled = executables.read(saved, key, "full")
         if compiled is None:
             exported = pickle.loads(program)
             lowered = jax.jit(
                 executables.named_call(exported, key, "full"),
                 compiler_options=cpu_compiler_options(),
             ).lower(*leaves)
-            if folder is not None:
-                os.makedirs(folder, exist_ok=True)
+            if saved is not None:
+                os.makedirs(saved, exist_ok=True)
             compiled = executables.compile_and_save(
                 lowered,
-                folder,
+                saved,
                 key,
                 "full",
                 executables.uses_lapack(exported),
