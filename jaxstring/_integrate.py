@@ -1,5 +1,6 @@
 """The one integration behind every solve: `integrate` is jaxstring's only call of
-`diffrax.diffeqsolve`.
+`diffrax.diffeqsolve`, and of its own step loop for the solves that reverse mode
+does not differentiate (`jaxstring._solvers.loop`).
 
 `solve(scene, config)` integrates a scene. Other solves hand `integrate` a
 transformed vector field and state: the forward sensitivities of `fit` and
@@ -63,14 +64,24 @@ def integrate(
     max_steps,
     adjoint=None,
     progress=False,
+    batched=False,
 ):
     """Integrate dy/dt = `vector_field(t, y, args)` from `y0` over [t0, t1]: the
     one `diffeqsolve` of the package. Never throws: the solution's `result` says
     whether it succeeded, with the data up to a failure. The save times of
     `saveat` must lie in [t0, t1] and increase (the callers check them before
-    anything is traced)."""
+    anything is traced). A solve that reverse mode does not differentiate runs
+    jaxstring's own step loop (`jaxstring._solvers.loop`: the same values from a
+    smaller program) unless it is `batched` (traced under `vmap`)."""
+    from ._solvers import loop
     from ._solvers.diffrax_compat import save_times_checked
 
+    if loop.serves(solver, controller, adjoint, progress, saveat, batched):
+        sub = saveat.subs
+        return loop.solve(
+            vector_field, y0, args, t0, t1, solver=solver, controller=controller,
+            dt0=dt0, ts=sub.ts, fn=sub.fn, max_steps=max_steps,
+        )  # fmt: skip
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
         if progress
@@ -118,13 +129,19 @@ def _projected(solver, adjoint):
 
 
 def solve_scene(
-    scene: Scene, config: SolveConfig, saveat, adjoint=None, differentiable=True
+    scene: Scene,
+    config: SolveConfig,
+    saveat,
+    adjoint=None,
+    differentiable=True,
+    batched=False,
 ):
     """diffrax's solution of `scene` under `config`, saved as `saveat(fn)` says,
     `fn` the projection onto the constraint manifold for a projected solve (None:
     the state as is). E.g. every step: `saveat=lambda fn: dfx.SaveAt(steps=True)`.
     `adjoint`: a diffrax adjoint (default: the configuration's for a gradient).
-    `differentiable`: False for a solve that nothing differentiates (`solve`)."""
+    `differentiable`: False for a solve that nothing differentiates (`solve`).
+    `batched`: traced under `vmap` (`integrate`)."""
     if not differentiable:
         adjoint = dfx.ForwardMode()  # plain while loops: nothing to checkpoint
     elif adjoint is None:
@@ -147,11 +164,17 @@ def solve_scene(
         max_steps=config.max_steps,
         adjoint=adjoint,
         progress=config.progress,
+        batched=batched,
     )
 
 
 def solve(
-    scene: Scene, config: SolveConfig, ts=None, adjoint=None, differentiable=True
+    scene: Scene,
+    config: SolveConfig,
+    ts=None,
+    adjoint=None,
+    differentiable=True,
+    batched=False,
 ) -> Trajectory:
     """Integrate `scene` under `config` and return its Trajectory.
 
@@ -167,7 +190,9 @@ def solve(
     from a smaller trace. diffrax then runs its plain while loops (its forward
     mode's) rather than the checkpointed ones of reverse mode, and jaxstring's
     Kvaerno and BDF do not wrap their Newton solves in `custom_root`, whose
-    derivative rule JAX traces with every solve (performance.md, "Compile time").
+    derivative rule JAX traces with every solve (performance.md, "Compile time"),
+    and the steps run in jaxstring's own loop (`jaxstring._solvers.loop`) unless
+    the solve is `batched` (traced under `vmap`: a sweep's members).
     """
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)
@@ -179,6 +204,7 @@ def solve(
         lambda fn: dfx.SaveAt(ts=ts) if fn is None else dfx.SaveAt(ts=ts, fn=fn),
         adjoint,
         differentiable,
+        batched,
     )
     return Trajectory.from_solution(ts, sol.ys, sol.result, sol.stats, scene)
 

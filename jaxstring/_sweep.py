@@ -139,7 +139,8 @@ def _member(vals, scene, getters, fn, config, ts):
         scene,
         [v.astype(g(scene).dtype) for v, g in zip(vals, getters)],
     )
-    traj = solve(sc, config, ts, differentiable=False)  # a sweep's: values only
+    # a sweep's: values only, vmapped (`_run_group`)
+    traj = solve(sc, config, ts, differentiable=False, batched=True)
     stats = {k: v for k, v in traj.stats.items() if k != "max_steps"}
     return fn(traj, sc), traj.result, stats
 
@@ -347,6 +348,8 @@ def _lockstep(vals, scene, getters, fn, config, ts):
         dt0=config.initial_step(),
         saveat=saveat,
         max_steps=config.max_steps,
+        # values only: jaxstring's own step loop (`jaxstring._solvers.loop`)
+        adjoint=dfx.ForwardMode(),
     )
     stats = {
         key: jnp.broadcast_to(sol.stats[key], (n,))

@@ -22,6 +22,11 @@ document as public:
    `throw=True`): `checks_as_nan` traces a program for worker processes with it
    returning NaN instead of raising through a host callback.
 
+6. `WrapTerm` (diffrax._term), the term that `diffeqsolve` hands its solver
+   (for the direction of time): `forward_term` wraps a term as `diffeqsolve`
+   does for t1 > t0, so that jaxstring's own step loop
+   (`jaxstring._solvers.loop`) runs each solver exactly as diffrax's loop does.
+
 diffrax versions outside `TESTED` are refused at import with a message that names
 the installed and the tested versions, rather than failing deep inside a solve.
 """
@@ -64,6 +69,13 @@ from diffrax._solver.runge_kutta import CalculateJacobian  # noqa: E402
 
 
 EVERY_STAGE = CalculateJacobian.every_stage
+
+
+def forward_term(term):
+    """`term` as `diffeqsolve` hands it to a solver where time runs forward."""
+    from diffrax._term import WrapTerm
+
+    return WrapTerm(term, 1)
 
 
 def result_code(result):
