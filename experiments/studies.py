@@ -755,7 +755,7 @@ STUDIES = (
         ),
         (
             Run((), _files("first_result")),
-            Run(("--ref", "405d7b2", "--rounds", "2"), _files("first_result_ref")),
+            Run(("--ref", "425b50c", "--rounds", "2"), _files("first_result_ref")),
             Run(
                 (
                     "--ref",
