@@ -72,15 +72,16 @@ def integrate(
     `saveat` must lie in [t0, t1] and increase (the callers check them before
     anything is traced). A solve that reverse mode does not differentiate runs
     jaxstring's own step loop (`jaxstring._solvers.loop`: the same values from a
-    smaller program) unless it is `batched` (traced under `vmap`)."""
+    smaller program); `batched`: traced under `vmap` (its loops are then
+    equinox's, which write a saved row at a time)."""
     from ._solvers import loop
     from ._solvers.diffrax_compat import save_times_checked
 
-    if loop.serves(solver, controller, adjoint, progress, saveat, batched):
+    if loop.serves(solver, controller, adjoint, progress, saveat):
         sub = saveat.subs
         return loop.solve(
             vector_field, y0, args, t0, t1, solver=solver, controller=controller,
-            dt0=dt0, ts=sub.ts, fn=sub.fn, max_steps=max_steps,
+            dt0=dt0, ts=sub.ts, fn=sub.fn, max_steps=max_steps, batched=batched,
         )  # fmt: skip
     meter = (
         dfx.TextProgressMeter(minimum_increase=0.05)
@@ -191,8 +192,8 @@ def solve(
     mode's) rather than the checkpointed ones of reverse mode, and jaxstring's
     Kvaerno and BDF do not wrap their Newton solves in `custom_root`, whose
     derivative rule JAX traces with every solve (performance.md, "Compile time"),
-    and the steps run in jaxstring's own loop (`jaxstring._solvers.loop`) unless
-    the solve is `batched` (traced under `vmap`: a sweep's members).
+    and the steps run in jaxstring's own loop (`jaxstring._solvers.loop`;
+    `batched`: the solve is traced under `vmap`, as a sweep's members are).
     """
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)

@@ -15,17 +15,19 @@ to compile (measured: docs/performance.md, "Compile time").
 It serves solves whose times run forward (t1 > t0, as every jaxstring solve),
 saved at given times, by a solver and controller whose steps never jump
 (`PIDController` without jump times, `ConstantStepSize`, jaxstring's
-`NewtonLimitedController`), under forward-mode derivatives or none. A solve under
-`vmap` (a sweep's members) keeps diffrax's loop: there a plain while loop selects
-every carried array whole at every step, the saved rows included, where
-equinox's loop writes one row (measured: the README's default scene, 16 members
-vmapped ran 2.5 times slower).
+`NewtonLimitedController`), under forward-mode derivatives or none. Under `vmap`
+(a sweep's members, `batched`) the loops are equinox's (`equinox.internal.while_loop`
+with the saved rows as its buffer), as diffrax's forward mode runs them: there a
+plain while loop selects every carried array whole at every step, the saved rows
+included, where equinox's writes one row (measured: the README's default scene,
+16 members vmapped, ran 2.5 times slower in plain loops).
 """
 
 from typing import Any, NamedTuple
 
 import diffrax as dfx
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.lax as lax
 import jax.numpy as jnp
@@ -46,11 +48,10 @@ class Solution(NamedTuple):
 _CONTROLLERS = (dfx.PIDController, dfx.ConstantStepSize, NewtonLimitedController)
 
 
-def serves(solver, controller, adjoint, progress, saveat, batched) -> bool:
+def serves(solver, controller, adjoint, progress, saveat) -> bool:
     """Whether `solve` serves a `diffeqsolve` of `solver` under `controller`,
-    `adjoint` and `saveat`, with the progress meter on or off, under `vmap`
-    (`batched`) or not."""
-    if batched or progress or not isinstance(adjoint, dfx.ForwardMode):
+    `adjoint` and `saveat`, with the progress meter on or off."""
+    if progress or not isinstance(adjoint, dfx.ForwardMode):
         return False
     if type(controller) not in _CONTROLLERS:
         return False
@@ -101,13 +102,34 @@ class _State(eqx.Module):
     ys: Any
 
 
+def _while(cond, body, init, buffers, batched):
+    """`lax.while_loop`; under `vmap` (`batched`) equinox's, with `buffers(init)`
+    written a row at a time."""
+    if not batched:
+        return lax.while_loop(cond, body, init)
+    return eqxi.while_loop(cond, body, init, buffers=buffers, kind="lax")
+
+
 def solve(
-    vector_field, y0, args, t0, t1, *, solver, controller, dt0, ts, fn, max_steps
+    vector_field,
+    y0,
+    args,
+    t0,
+    t1,
+    *,
+    solver,
+    controller,
+    dt0,
+    ts,
+    fn,
+    max_steps,
+    batched=False,
 ) -> Solution:
     """Integrate dy/dt = `vector_field(t, y, args)` from `y0` over [t0, t1] and
     save `fn(t, y, args)` (None: y) at the increasing times `ts` in [t0, t1], as
     `diffeqsolve(..., saveat=SaveAt(ts=ts, fn=fn), adjoint=ForwardMode(),
-    throw=False)` does. Saved rows not reached (a failed solve) are inf."""
+    throw=False)` does. Saved rows not reached (a failed solve) are inf.
+    `batched`: traced under `vmap` (the loops are then equinox's)."""
     if fn is None:
         fn = lambda t, y, args: y
     # wrapped for the direction of time, as diffeqsolve does (a solver may take
@@ -184,7 +206,9 @@ def solve(
             row = fn(t, interpolator.evaluate(t), args)
             return i + 1, jtu.tree_map(lambda r, b: b.at[i].set(r), row, ys)
 
-        save_index, ys = lax.while_loop(save_cond, save_body, (s.save_index, s.ys))
+        save_index, ys = _while(
+            save_cond, save_body, (s.save_index, s.ys), lambda c: c[1], batched
+        )
         return _State(
             tprev, tnext, y, solver_state, controller_state, result,
             s.num_steps + 1,
@@ -193,7 +217,7 @@ def solve(
             save_index, ys,
         )  # fmt: skip
 
-    final = lax.while_loop(cond, body, init)
+    final = _while(cond, body, init, lambda s: s.ys, batched)
     result = dfx.RESULTS.where(
         going(final), dfx.RESULTS.max_steps_reached, final.result
     )

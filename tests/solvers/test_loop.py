@@ -120,3 +120,33 @@ def test_a_forward_mode_derivative_through_the_own_loop_matches_differences(
     diff = (run(1e4 + h) - run(1e4 - h)) / (2 * h)
     assert abs(float(diff)) * 1e4 > 1e-4  # the stiffness moves the end mass
     assert abs(float(tangent) - float(diff)) <= 1e-5 * abs(float(diff))
+
+
+def test_members_under_vmap_get_diffrax_loops_values_exactly(monkeypatch):
+    # A sweep's members: the own loop under vmap (equinox's buffered loops, a
+    # saved row written at a time) against diffrax's, member by member; members
+    # take different numbers of steps.
+    scene = js.string_pendulum(k=4, EA=1e4, t1=0.2)
+    config = js.SolveConfig(solver="kvaerno5", rtol=1e-6, atol=1e-6)
+    ts = jnp.linspace(0.0, 0.2, 9)
+    alphas = jnp.array([0.001, 0.05, 0.3])
+
+    def members(own_loop):
+        with monkeypatch.context() as m:
+            if not own_loop:
+                m.setattr(loop, "serves", lambda *args: False)
+
+            def member(alpha):
+                sc = eqx.tree_at(lambda s: s.effects[1].alpha, scene, alpha)
+                traj = _integrate.solve(
+                    sc, config, ts, differentiable=False, batched=True
+                )
+                return traj.ys, traj.stats["num_steps"]
+
+            return jax.jit(jax.vmap(member))(alphas)
+
+    (own, own_steps), (theirs, their_steps) = members(True), members(False)
+    np.testing.assert_array_equal(np.asarray(own_steps), np.asarray(their_steps))
+    assert len(set(np.asarray(own_steps).tolist())) > 1
+    np.testing.assert_array_equal(np.asarray(own), np.asarray(theirs))
+    assert np.isfinite(np.asarray(own)).all()
