@@ -120,14 +120,15 @@ class _Problem(eqx.Module):
         vals = [v.astype(c.dtype) for v, c in zip(vals, current)]
         return eqx.tree_at(lambda s: [g(s) for g in self.getters], scene, vals)
 
-    def residual(self, theta, scene):
+    def residual(self, theta, scene, batched=False):
         # `adjoint="sensitivity"`: derivatives from sensitivities integrated with
-        # the state; else forward mode through the solve.
+        # the state; else forward mode through the solve. `batched`: under vmap
+        # (stacked scenes).
         adjoint = self.config.adjoint_for("jacobian")
         if isinstance(adjoint, SensitivityAdjoint):
-            return _sensitivity_residual(self, jnp.stack(theta), scene)
+            return _sensitivity_residual(self, jnp.stack(theta), scene, batched)
         sc = self.with_values(scene, theta)
-        traj = solve(sc, self.config, self.ts, adjoint=adjoint)
+        traj = solve(sc, self.config, self.ts, adjoint=adjoint, batched=batched)
         return jnp.ravel(self.residual_fn(traj, sc))
 
     def flat_residual(self, traj, sc):
@@ -136,7 +137,9 @@ class _Problem(eqx.Module):
     def residuals(self, theta, args=None):
         del args
         if self.stacked is not None:
-            members = eqx.filter_vmap(self.residual, in_axes=(None, 0))
+            members = eqx.filter_vmap(
+                lambda th, sc: self.residual(th, sc, batched=True), in_axes=(None, 0)
+            )
             return jnp.ravel(members(theta, self.stacked))
         out = []
         for scene in self.scenes:
@@ -145,16 +148,17 @@ class _Problem(eqx.Module):
 
 
 @eqx.filter_custom_jvp
-def _sensitivity_residual(problem, x, scene):
+def _sensitivity_residual(problem, x, scene, batched):
     """The residuals at the parameters `x` (theta, stacked), with a JVP from the
-    sensitivities integrated beside the state (along `x` only)."""
+    sensitivities integrated beside the state (along `x` only). `batched`: under
+    vmap."""
     sc = problem.with_values(scene, list(x))
     return problem.flat_residual(solve(sc, problem.config, problem.ts), sc)
 
 
 @_sensitivity_residual.def_jvp
 def _sensitivity_residual_jvp(primals, tangents):
-    problem, x, scene = primals
+    problem, x, scene, batched = primals
     tx = tangents[1]
     r, d = derivatives(
         lambda xx: problem.with_values(scene, list(xx)),
@@ -163,6 +167,7 @@ def _sensitivity_residual_jvp(primals, tangents):
         problem.config,
         problem.ts,
         problem.flat_residual,
+        batched=batched,
     )
     return r, d.T @ (jnp.zeros_like(x) if tx is None else tx)
 

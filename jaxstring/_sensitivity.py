@@ -70,7 +70,15 @@ class _AugmentedField(eqx.Module):
 
 
 def sensitivity_solve(
-    scene_of: Callable, x, directions, solver, controller, ts, max_steps, dt0
+    scene_of: Callable,
+    x,
+    directions,
+    solver,
+    controller,
+    ts,
+    max_steps,
+    dt0,
+    batched=False,
 ):
     """Integrate the scene `scene_of(x)` and its sensitivities to the flat parameter
     vector `x` along the rows of `directions` `(P, x.size)`, saving at `ts`.
@@ -79,7 +87,8 @@ def sensitivity_solve(
     parameter times its own magnitude): the error control weighs them like the
     state. `solver` and `controller` as `simulate` builds them for the scene.
     Returns `(ys, S, sol)`: the states `(T, *y0.shape)`, the sensitivities
-    `(P, T, *y0.shape)` and diffrax's solution (result and statistics).
+    `(P, T, *y0.shape)` and the solution's result and statistics. `batched`:
+    traced under `vmap` (`integrate`).
     """
     scene: Scene = scene_of(x)
     y0 = scene.y0
@@ -98,12 +107,18 @@ def sensitivity_solve(
         dt0=dt0,
         saveat=dfx.SaveAt(ts=ts),
         max_steps=max_steps,
+        # the sensitivities are the derivatives: nothing differentiates this solve
+        # (jaxstring's own step loop, `jaxstring._solvers.loop`)
+        adjoint=dfx.ForwardMode(),
+        batched=batched,
     )
     ys, S = jax.vmap(field.split)(sol.ys)
     return ys, jnp.moveaxis(S, 1, 0), sol
 
 
-def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
+def derivatives(
+    scene_of: Callable, x, is_log, config, ts, out_fn: Callable, batched=False
+):
     """`out_fn(traj, scene)` at the scene `scene_of(x)` and its derivatives with
     respect to each entry of the flat parameter vector `x`, stacked on a leading
     axis, from one solve of the state and its sensitivities.
@@ -112,7 +127,7 @@ def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
     the configuration's). Each
     direction is its parameter's own magnitude (1 where `is_log`: log-parameters,
     and for a zero value), so that the sensitivities have the state's scale and its
-    error control fits them."""
+    error control fits them. `batched`: traced under `vmap` (`integrate`)."""
     scene = scene_of(x)
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)
@@ -120,8 +135,9 @@ def derivatives(scene_of: Callable, x, is_log, config, ts, out_fn: Callable):
     scale = lax.stop_gradient(jnp.where(is_log | (x == 0), 1.0, jnp.abs(x)))
     directions = jnp.diag(scale)
     ys, S, sol = sensitivity_solve(
-        scene_of, x, directions, solver, controller, ts, config.max_steps, dt0
-    )
+        scene_of, x, directions, solver, controller, ts, config.max_steps, dt0,
+        batched,
+    )  # fmt: skip
 
     def out_of(ys_, xx):
         sc = scene_of(xx)

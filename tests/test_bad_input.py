@@ -2,10 +2,10 @@
 value it got and the valid range, before anything compiles; the command line exits
 with code 2 and that message, without a traceback.
 
-Every case runs with `diffrax.diffeqsolve` replaced by a function that fails the
-test: a refusal that came only after a solve had been traced (and compiled) does not
-count. (tests/test_errors.py holds further cases of the string pendulum and of
-`simulate`; none is repeated here.)
+Every case runs with `diffrax.diffeqsolve` and jaxstring's own step loop replaced by a
+function that fails the test: a refusal that came only after a solve had been traced
+(and compiled) does not count. (tests/test_errors.py holds further cases of the string
+pendulum and of `simulate`; none is repeated here.)
 """
 
 import functools
@@ -18,6 +18,7 @@ import pytest
 
 import jaxstring as js
 from jaxstring import tandem as td, tether as tt
+from jaxstring._solvers import loop as solver_loop
 from jaxstring.cli.main import main
 
 
@@ -30,6 +31,7 @@ def no_solve(monkeypatch):
         raise AssertionError("a solve was traced before the input was refused")
 
     monkeypatch.setattr(diffrax, "diffeqsolve", traced)
+    monkeypatch.setattr(solver_loop, "solve", traced)  # jaxstring's own step loop
 
 
 # Scenes the cases start from (built once per process, on first use).
