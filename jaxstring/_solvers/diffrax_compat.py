@@ -25,7 +25,10 @@ document as public:
 6. `WrapTerm` (diffrax._term), the term that `diffeqsolve` hands its solver
    (for the direction of time): `forward_term` wraps a term as `diffeqsolve`
    does for t1 > t0, so that jaxstring's own step loop
-   (`jaxstring._solvers.loop`) runs each solver exactly as diffrax's loop does.
+   (`jaxstring._solvers.loop`) runs each solver exactly as diffrax's loop does;
+   and `use_stepsize_tol` (diffrax._root_finder), the marker of a root finder
+   whose tolerances `diffeqsolve` takes from the step-size controller
+   (`takes_controller_tolerances`: such a solver stays with `diffeqsolve`).
 
 diffrax versions outside `TESTED` are refused at import with a message that names
 the installed and the tested versions, rather than failing deep inside a solve.
@@ -69,6 +72,18 @@ from diffrax._solver.runge_kutta import CalculateJacobian  # noqa: E402
 
 
 EVERY_STAGE = CalculateJacobian.every_stage
+
+
+def takes_controller_tolerances(solver) -> bool:
+    """Whether `solver`'s root finder takes its tolerances or norm from the
+    step-size controller (diffrax's default implicit solvers), which
+    `diffeqsolve` sets."""
+    from diffrax._root_finder import use_stepsize_tol
+
+    finder = getattr(solver, "root_finder", None)
+    return finder is not None and any(
+        getattr(finder, a, None) is use_stepsize_tol for a in ("rtol", "atol", "norm")
+    )
 
 
 def forward_term(term):

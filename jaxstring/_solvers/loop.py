@@ -33,7 +33,7 @@ import jax.lax as lax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
-from .diffrax_compat import forward_term
+from .diffrax_compat import forward_term, takes_controller_tolerances
 from .step_size import NewtonLimitedController
 
 
@@ -62,13 +62,22 @@ def serves(solver, controller, adjoint, progress, saveat) -> bool:
         return False
     # an implicit solver whose root finder takes the controller's tolerances
     # (diffrax's default Kvaerno): diffeqsolve sets them
-    finder = getattr(solver, "root_finder", None)
-    tol = dfx.with_stepsize_controller_tols
-    if finder is not None and any(
-        getattr(finder, a, None) is tol for a in ("rtol", "atol", "norm")
-    ):
-        return False
-    return True
+    inner = solver.solver if isinstance(solver, dfx.AbstractWrappedSolver) else solver
+    return not takes_controller_tolerances(inner)
+
+
+def _plain_stages(solver):
+    """`solver` with the stages of a Runge-Kutta method (a wrapped one's: a
+    projection) in a plain scan, as diffrax's forward mode runs them (its
+    checkpointed scan has a custom_vjp, which forward mode cannot go through)."""
+    if isinstance(solver, dfx.AbstractWrappedSolver):
+        inner = _plain_stages(solver.solver)
+        return eqx.tree_at(lambda s: s.solver, solver, inner)
+    if isinstance(solver, dfx.AbstractRungeKutta) and solver.scan_kind is None:
+        return eqx.tree_at(
+            lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None
+        )
+    return solver
 
 
 def _less_100_ulp(t1):
@@ -142,12 +151,7 @@ def solve(
     if dt0 is not None:
         dt0 = jnp.asarray(dt0, dtype)
     controller = controller.wrap(1)
-    if isinstance(solver, dfx.AbstractRungeKutta) and solver.scan_kind is None:
-        # the stages in a plain scan, as diffrax's forward mode runs them (its
-        # checkpointed scan has a custom_vjp, which forward mode cannot go through)
-        solver = eqx.tree_at(
-            lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None
-        )
+    solver = _plain_stages(solver)
     error_order = solver.error_order(terms)
     tnext, controller_state = controller.init(
         terms, t0, t1, y0, dt0, args, solver.func, error_order
