@@ -137,9 +137,10 @@ def solve_scene(
     differentiable=True,
     batched=False,
 ):
-    """diffrax's solution of `scene` under `config`, saved as `saveat(fn)` says,
-    `fn` the projection onto the constraint manifold for a projected solve (None:
-    the state as is). E.g. every step: `saveat=lambda fn: dfx.SaveAt(steps=True)`.
+    """`integrate`'s solution of `scene` under `config`, saved as `saveat(fn)`
+    says, `fn` the projection onto the constraint manifold for a projected solve
+    (None: the state as is). E.g. every step:
+    `saveat=lambda fn: dfx.SaveAt(steps=True)`.
     `adjoint`: a diffrax adjoint (default: the configuration's for a gradient).
     `differentiable`: False for a solve that nothing differentiates (`solve`).
     `batched`: traced under `vmap` (`integrate`)."""
@@ -188,12 +189,12 @@ def solve(
 
     `differentiable=False` is for a solve whose result nothing differentiates (a
     saved program, a call on concrete arrays, a sweep's members): the same values,
-    from a smaller trace. diffrax then runs its plain while loops (its forward
-    mode's) rather than the checkpointed ones of reverse mode, and jaxstring's
-    Kvaerno and BDF do not wrap their Newton solves in `custom_root`, whose
-    derivative rule JAX traces with every solve (performance.md, "Compile time"),
-    and the steps run in jaxstring's own loop (`jaxstring._solvers.loop`;
-    `batched`: the solve is traced under `vmap`, as a sweep's members are).
+    from a smaller trace. The steps then run in jaxstring's own loop of plain
+    while loops (`jaxstring._solvers.loop`) rather than diffrax's checkpointed
+    ones of reverse mode, and jaxstring's Kvaerno and BDF do not wrap their
+    Newton solves in `custom_root`, whose derivative rule JAX traces with every
+    solve (performance.md, "Compile time"). `batched`: the solve is traced under
+    `vmap` (a sweep's members).
     """
     if ts is None:
         ts = config.save_times(scene.t0, scene.t1)

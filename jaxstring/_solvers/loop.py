@@ -8,19 +8,18 @@ while loops (a select per carried array and per buffer), the 100 calls that put
 `t1` less 100 units in the last place, the loop body traced once more to find which
 of its values stay static. `solve` below runs the same step, controller, clipping
 and saving as diffrax's loop, in the same order, with one `lax.while_loop` over the
-steps and one over a step's save times: the same values (the tests compare them
-with `diffeqsolve` to rounding), from a program about half as large to trace and
-to compile (measured: docs/performance.md, "Compile time").
+steps and one over a step's save times: the same values to the last bit (the
+tests compare them with `diffeqsolve`'s), from a program about a third smaller to
+trace and to compile (measured: docs/performance.md, "A step loop of its own").
 
 It serves solves whose times run forward (t1 > t0, as every jaxstring solve),
 saved at given times, by a solver and controller whose steps never jump
-(`PIDController` without jump times, `ConstantStepSize`, jaxstring's
+(`PIDController`, `ConstantStepSize`, jaxstring's
 `NewtonLimitedController`), under forward-mode derivatives or none. Under `vmap`
 (a sweep's members, `batched`) the loops are equinox's (`equinox.internal.while_loop`
 with the saved rows as its buffer), as diffrax's forward mode runs them: there a
 plain while loop selects every carried array whole at every step, the saved rows
-included, where equinox's writes one row (measured: the README's default scene,
-16 members vmapped, ran 2.5 times slower in plain loops).
+included, where equinox's writes one row (measured: the same page).
 """
 
 from typing import Any, NamedTuple
