@@ -26,8 +26,10 @@ An executable is machine code: like the rest of the cache folder, read only what
 this user's own processes wrote.
 """
 
+import contextlib
 import functools
 import hashlib
+import importlib
 import os
 import pathlib
 import pickle
@@ -122,10 +124,39 @@ def _lapack_ready() -> None:
     lapack.prepare_lapack_call("getrf_ffi", np.dtype(np.float64))
 
 
+_WHILE_COMPILING: list = []  # modules for the next compilation to import meanwhile
+
+
+@contextlib.contextmanager
+def imports_while_compiling(*modules: str):
+    """Within the block, the first compilation of `compile_and_save` imports
+    `modules` in a thread while XLA compiles (in C++, with Python's interpreter
+    lock released): for a caller that needs them once the solve is done (the
+    command's figure). Where nothing is compiled (a saved executable) they are
+    imported where they are used, as before."""
+    _WHILE_COMPILING[:] = modules
+    try:
+        yield
+    finally:
+        _WHILE_COMPILING.clear()
+
+
+def _import(modules) -> None:
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001  (raised again where it is imported)
+            pass
+
+
 def compile_and_save(lowered, folder, key: str, tier: str, lapack: bool, compiler=None):
     """`lowered` compiled (by `compiler(lowered)`, default `lowered.compile()`) and,
     where that compiled it rather than reading it from JAX's compilation cache,
     saved in `folder` (None: not saved) with the flag `lapack` (`uses_lapack`)."""
+    if _WHILE_COMPILING:
+        modules = tuple(_WHILE_COMPILING)
+        _WHILE_COMPILING.clear()
+        threading.Thread(target=_import, args=(modules,), name="imports").start()
     hits = _cache_hits()
     compiled = lowered.compile() if compiler is None else compiler(lowered)
     if folder is not None and _cache_hits() == hits:

@@ -282,15 +282,14 @@ def _run_scene(args: argparse.Namespace) -> int:
         return 2
 
     import jax
-    import jax.numpy as jnp
     import numpy as np
 
+    from .._executables import imports_while_compiling
     from .._simulate import simulate
-    from ..pendulum import plot as plot
 
     t0, t1 = float(scene.t0), float(scene.t1)
     n_save = max(int(round((t1 - t0) / SAVE_DT)) + 1, 2)
-    ts = jnp.linspace(t0, t1, n_save)
+    ts = np.linspace(t0, t1, n_save)  # on the host: no program to compile
     progress = runner.long_run(args) if args.progress is None else args.progress
 
     def call():
@@ -306,8 +305,14 @@ def _run_scene(args: argparse.Namespace) -> int:
         traj = jax.block_until_ready(traj)
         return traj, time.perf_counter() - start
 
+    # the figure's modules, imported while XLA compiles the solve
+    plots = (
+        "jaxstring.pendulum.plot" if runner.figure is None else "jaxstring.tether.plot"
+    )
+    figure_modules = ("matplotlib.figure", "matplotlib.backends.backend_agg", plots)
     try:
-        traj, wall_first = call()
+        with imports_while_compiling(*figure_modules):
+            traj, wall_first = call()
         wall_second = None
         if args.timing:
             traj, wall_second = call()
@@ -333,6 +338,8 @@ def _run_scene(args: argparse.Namespace) -> int:
         + ", ".join(f"{k}={v:g}" for k, v in params.items() if _is_number(v))
         + f"  [{args.solver}, {traj.status}]"
     )
+    from ..pendulum import plot
+
     (runner.figure or plot.summary_figure)(traj, png, title=title)
     gif = None
     if args.animate:
