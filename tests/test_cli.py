@@ -1,3 +1,4 @@
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -469,3 +470,24 @@ def test_a_later_process_runs_a_saved_solve_without_importing_diffrax(tmp_path):
     fall = -0.5 * 9.81 * 0.3**2
     np.testing.assert_allclose(first["end"][1], fall, rtol=1e-2)
     np.testing.assert_allclose(np.array(first["swept"])[:, 1], fall, rtol=1e-2)
+
+
+def test_modules_named_for_a_compilation_are_imported_while_it_runs():
+    # The command imports its figure's modules while XLA compiles the solve: the
+    # first compilation in the block starts them in a thread; a later one, and
+    # one outside the block, start nothing.
+    import sys
+    import threading
+
+    from jaxstring import _executables
+
+    assert "tabnanny" not in sys.modules  # a standard module nothing here imports
+    lowered = jax.jit(lambda x: 3.0 * x + 1.0).lower(1.0)
+    with _executables.imports_while_compiling("tabnanny"):
+        compiled = _executables.compile_and_save(lowered, None, "k", "full", False)
+        assert not _executables._WHILE_COMPILING  # started once only
+    for thread in threading.enumerate():
+        if thread.name == "imports":
+            thread.join(timeout=30)
+    assert "tabnanny" in sys.modules
+    assert float(compiled(2.0)) == 7.0
