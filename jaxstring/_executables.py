@@ -52,6 +52,50 @@ def named_call(exported, key: str, tier: str):
     return call
 
 
+EXPORT_TESTED = (
+    (0, 10, 2),
+    (0, 11, 0),
+)  # the JAX versions `export_with_lowering` reads
+
+
+def export_with_lowering(jitted, avals):
+    """(`jax.export.export(jitted, platforms=("cpu",))(*avals)`, the
+    `jax.stages.Lowered` that export made it from, or None).
+
+    A process that traced a program compiles the export's own lowering: calling
+    the exported program would lower it again, around a copy of its module
+    (serialised and read back), and JAX's lowering of such a call makes LAPACK's
+    kernels ready whether or not the program calls them (importing
+    `scipy.linalg`: 0.25 s of a cold process). `jax.export` keeps its lowering
+    to itself, so this repeats its two steps (trace; lower for export; JAX's
+    private `_export_lowered`) for the JAX versions in `EXPORT_TESTED`; for
+    another version, or where that API has moved, it exports through the
+    public function and returns no lowering."""
+    version = tuple(int(p) for p in jax.__version__.split(".")[:3] if p.isdigit())
+    if EXPORT_TESTED[0] <= version < EXPORT_TESTED[1]:
+        try:
+            from jax._src import config
+            from jax._src.export import _export
+            from jax._src.interpreters import mlir
+
+            traced = jitted.trace(*avals)
+            parameters = mlir.LoweringParameters(
+                for_export=True,
+                hoist_constants_as_args=False,
+                export_ignore_forward_compatibility=(
+                    config.export_ignore_forward_compatibility.value
+                ),
+            )
+            lowered = traced.lower(
+                lowering_platforms=("cpu",), _private_parameters=parameters
+            )
+            exported = _export._export_lowered(lowered, traced.jaxpr, traced.fun_name)
+            return exported, lowered
+        except (ImportError, AttributeError, TypeError):  # moved: the public way
+            pass
+    return jax.export.export(jitted, platforms=("cpu",))(*avals), None
+
+
 def uses_lapack(exported) -> bool:
     """Whether the traced program calls jaxlib's LAPACK kernels."""
     return b"lapack_" in exported.mlir_module_serialized

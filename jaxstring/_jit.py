@@ -64,11 +64,15 @@ PROMOTE_AFTER_CALLS = 16
 short each run, the optimised program serves the rest of the loop)."""
 
 
-@functools.cache
 def cpu_compiler_options(quick: bool = False) -> dict:
     """`CPU_COMPILER_OPTIONS` (with `QUICK_OPTIONS` where `quick`) less any option
     this jaxlib's XLA does not know (a newer jaxlib may drop one): each is tried
     once per process, compiling a one-operation program on the CPU."""
+    return dict(_known_options(bool(quick)))
+
+
+@functools.cache
+def _known_options(quick: bool) -> dict:
     wanted = dict(CPU_COMPILER_OPTIONS) | (QUICK_OPTIONS if quick else {})
     cpu = jax.local_devices(backend="cpu")[0]
     lowered = jax.jit(lambda x: x + 1.0).lower(

@@ -10,7 +10,9 @@ well by this machine: its processor, XLA's version and flags); a later process
 on the same machine loads the executable and runs it, neither tracing nor
 lowering nor compiling. Where only the traced program fits (another machine, a
 tiered program's other compilation) it is lowered and compiled from the saved
-trace, its compilation read from JAX's compilation cache where it is there.
+trace, its compilation read from JAX's compilation cache where it is there. The
+process that traces a program compiles the export's own lowering
+(`jaxstring._executables.export_with_lowering`), not the exported program's call.
 
 A saved program is keyed by everything that decides the traced program: the
 function's module and name (a function whose result depends on its arguments
@@ -275,15 +277,22 @@ class _Program:
             else None
         )
 
+    def _export(self, leaves):
+        """The traced program, read or traced and saved; the lowering it was
+        traced with where it was traced now (else None)."""
+        lowered = None
+        if self._exported is None:
+            self._exported, lowered = _exported(
+                self._fn, self._key, self._static, self._treedef, leaves
+            )
+            if self._exported is None:
+                raise _Refused
+        return lowered
+
     def _jitted(self, quick, leaves):
         """The traced program (read, or traced and saved), compiled by `jax.jit`."""
         if quick not in self._jits:
-            if self._exported is None:
-                self._exported = _exported(
-                    self._fn, self._key, self._static, self._treedef, leaves
-                )
-                if self._exported is None:
-                    raise _Refused
+            self._export(leaves)
             self._jits[quick] = jax.jit(
                 executables.named_call(self._exported, self._key, _tier(quick)),
                 compiler_options=cpu_compiler_options(quick),
@@ -298,11 +307,21 @@ class _Program:
             compiled = executables.read(folder, self._key, tier)
             self._read[quick] = compiled is not None
             if compiled is None:
-                lowered = self._jitted(quick, leaves).lower(*leaves)
+                # Traced in this process: its own lowering is compiled (the saved
+                # program's call would lower it again, around a copy of it).
+                fresh = self._export(leaves) if quick not in self._jits else None
                 lapack = executables.uses_lapack(self._exported)
-                compiled = executables.compile_and_save(
-                    lowered, folder, self._key, tier, lapack
-                )
+                if fresh is not None:
+                    options = cpu_compiler_options(quick)
+                    compiled = executables.compile_and_save(
+                        fresh, folder, self._key, tier, lapack,
+                        compiler=lambda lowered: lowered.compile(options),
+                    )  # fmt: skip
+                else:
+                    lowered = self._jitted(quick, leaves).lower(*leaves)
+                    compiled = executables.compile_and_save(
+                        lowered, folder, self._key, tier, lapack
+                    )
             self._compilations[quick] = compiled
         return compiled
 
@@ -405,37 +424,41 @@ def saved_export(fn, static, treedef, leaves):
     if program_folder() is None:
         return None
     args = eqx.combine(jtu.tree_unflatten(treedef, leaves), static)
-    return _exported(fn, _key(fn, args)[0], static, treedef, leaves)
+    return _exported(fn, _key(fn, args)[0], static, treedef, leaves)[0]
 
 
 def _exported(fn, key, static, treedef, leaves):
-    """The program of `key`, read or traced and saved (`_load_or_export`); None
-    where there is no key or it cannot be exported (then remembered)."""
+    """(the program of `key`, read or traced and saved, or None where there is no
+    key or it cannot be exported (then remembered); the lowering it was traced
+    with, where it was traced now, else None): `_load_or_export`."""
     if key is None or key in _REFUSED:
-        return None
-    exported = _load_or_export(fn, key, static, treedef, leaves)
+        return None, None
+    exported, lowered = _load_or_export(fn, key, static, treedef, leaves)
     if exported is None:
         _REFUSED.add(key)
-    return exported
+    return exported, lowered
 
 
 def _load_or_export(fn, key, static, treedef, leaves):
     path = pathlib.Path(program_folder()) / f"{key}.program"
     if path.exists():
         try:
-            return pickle.loads(path.read_bytes())
+            return pickle.loads(path.read_bytes()), None
         except Exception:  # unreadable or written by another version: trace again
             pass
 
     def flat(*xs):
         return fn(*eqx.combine(jtu.tree_unflatten(treedef, xs), static))
 
+    # Named after its key: the name is part of its key in JAX's compilation cache
+    # (`jaxstring._executables`).
+    flat.__name__ = flat.__qualname__ = f"saved_{key[:16]}"
     avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
     try:
         jitted = jax.jit(flat, compiler_options=cpu_compiler_options())
-        exported = jax.export.export(jitted, platforms=("cpu",))(*avals)
+        exported, lowered = executables.export_with_lowering(jitted, avals)
     except (NotImplementedError, ValueError):  # host callbacks cannot be exported
-        return None
+        return None, None
     try:
         data = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
@@ -443,7 +466,7 @@ def _load_or_export(fn, key, static, treedef, leaves):
         os.replace(tmp, path)
     except (OSError, pickle.PicklingError, TypeError, AttributeError):
         pass  # not saved: this process still runs the program it traced
-    return exported
+    return exported, lowered
 
 
 def eager_jit(fun=None, *, tiered: bool = False):

@@ -318,6 +318,75 @@ def test_a_later_process_runs_the_saved_executable_without_the_traced_program(
     assert executable.stat().st_size > 1000
 
 
+_PLAIN_DRIVER = """
+import json, sys
+import jax
+import jax.numpy as jnp
+from jaxstring import _executables, _programs
+
+events = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda name, secs, **kw: events.append((name, kw.get("fun_name", ""))))
+lowerings = []
+export = _executables.export_with_lowering
+def counted(*args):
+    exported, lowered = export(*args)
+    lowerings.append(lowered is not None)
+    return exported, lowered
+_executables.export_with_lowering = counted
+
+def decay(y0, rate):
+    def step(_, y):
+        return y - 0.01 * rate * y
+    return {"y": jax.lax.fori_loop(0, 100, step, y0)}
+
+_programs.set_program_folder(sys.argv[1])
+out = _programs.call(decay, jnp.linspace(1.0, 2.0, 5), jnp.asarray(3.0))
+saved = [n for n, f in events if n.endswith("jaxpr_to_mlir_module_duration")
+         and "saved_" in f]
+print(json.dumps({"y": [float(v).hex() for v in out["y"]], "lowerings": lowerings,
+                  "saved_lowerings": len(saved),
+                  "lapack_loaded": "scipy.linalg" in sys.modules}))
+"""
+
+
+def test_a_process_that_traces_a_program_compiles_the_exports_own_lowering(
+    tmp_path,
+):
+    # The process that traces a saved program compiles the lowering that the
+    # export made (one lowering, not a second one of the exported call), and so
+    # does not load LAPACK's kernels for a program without them; the executable
+    # it saves gives a later process the same values to the bit.
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    driver, folder = tmp_path / "plain_driver.py", tmp_path / "programs"
+    driver.write_text(_PLAIN_DRIVER)  # (a function of a file is saved; of -c not)
+    folder.mkdir()
+
+    def run():
+        out = subprocess.run(
+            [sys.executable, str(driver), str(folder)],
+            env=env, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert out.returncode == 0, out.stderr[-2000:]
+        return json.loads(out.stdout.splitlines()[-1])
+
+    first, second = run(), run()
+    assert first["lowerings"] == [True] and first["saved_lowerings"] == 1
+    assert not first["lapack_loaded"]
+    assert len(list(folder.glob("*.full.executable"))) == 1
+    assert second["lowerings"] == [] and second["saved_lowerings"] == 0
+    assert second["y"] == first["y"]
+    # y (1 - 0.03)^100, elementwise
+    expected = np.linspace(1.0, 2.0, 5) * 0.97**100
+    got = np.array([float.fromhex(v) for v in first["y"]])
+    np.testing.assert_allclose(got, expected, rtol=1e-13)
+
+
 def test_an_executable_read_from_jaxs_cache_is_not_saved(tmp_path):
     # XLA:CPU serialises an executable loaded from JAX's compilation cache
     # incompletely: a program compiled by reading that cache (here: the same

@@ -115,7 +115,7 @@ def _explicit_stage(args) -> bool:
     return diagonal.shape == () and bool(diagonal == 0)
 
 
-def _stage_model_jacobian(u, args):
+def _stage_model_jacobian(u, args, shape_only=False):
     """The Jacobian of diffrax's implicit Runge-Kutta stage relation at `u` from the
     model's own Jacobian (`AbstractModel.vf_jacobian`), else None.
 
@@ -128,7 +128,8 @@ def _stage_model_jacobian(u, args):
     (one vector field more per Jacobian), or the matrix is NaN and the Newton
     iteration fails loudly, as `SecondOrderFactor` does for a wrong structure.
     Any other relation, or a model without its own Jacobian, gives None: the
-    Jacobian is probed with JVPs as before."""
+    Jacobian is probed with JVPs as before. `shape_only` (for the structure of
+    its factorisation only): without the run-time check."""
     a = stage_arguments(args)
     if a.kind != "esdirk_f":
         return None
@@ -144,6 +145,8 @@ def _stage_model_jacobian(u, args):
     jac = inner.model.vf_jacobian(ti, y_at, inner.effects, inner.env)
     if jac is None:
         return None
+    if shape_only:
+        return jac.scale_shift(1.0, -diagonal * control)
     same = jnp.array_equal(vf(ti, y_at, inner), inner.vector_field(ti, y_at))
     same = same & jnp.array_equal(step, u * control)
     return jac.scale_shift(1.0, jnp.where(same, -diagonal * control, jnp.nan))
@@ -238,7 +241,7 @@ class StageNewton(optx.AbstractRootFinder):
             fac = batched_factor(noaux, y, args, self.linear_solver, shape_only)
             return lax.stop_gradient(fac)
         width = _linalg.choose_structure(noaux, y, args, self.linear_solver)
-        jac = _stage_model_jacobian(y, args) if width == 1 else None
+        jac = _stage_model_jacobian(y, args, shape_only) if width == 1 else None
         if jac is None:
             so = _linalg.declared_second_order(noaux, y, args)
             seq = _linalg.declared_sequential(noaux, y, args)

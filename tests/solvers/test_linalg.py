@@ -313,14 +313,14 @@ def test_compile_options_this_xla_does_not_know_are_left_out(monkeypatch):
     assert known == _jit.CPU_COMPILER_OPTIONS  # every option known to this jaxlib
     unknown = {"xla_cpu_no_such_option_here": True}
     monkeypatch.setattr(_jit, "CPU_COMPILER_OPTIONS", known | unknown)
-    _jit.cpu_compiler_options.cache_clear()
+    _jit._known_options.cache_clear()
     try:
         assert _jit.cpu_compiler_options() == known
         f = _jit.cpu_jit(lambda x: jnp.sum(x * x))
         assert float(f(jnp.arange(4.0))) == 14.0
     finally:
         monkeypatch.undo()
-        _jit.cpu_compiler_options.cache_clear()
+        _jit._known_options.cache_clear()
 
 
 # ---------------------------------------------------------------------------
