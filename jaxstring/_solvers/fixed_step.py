@@ -20,8 +20,9 @@ Newton from the step's start when they stall: it pays where the stiff force is
 linear in the state (natural variables), not in displacement variables, where the
 stiff axis turns with the string (see `jaxstring._solvers.stage_newton`; measured:
 docs/numerics.md, "Fixed-step methods"). The Jacobian is banded for strings and
-chains (a few coloured JVPs and block cyclic reduction, ``jaxstring._linalg``), so
-a step stays O(k). The iteration stops when the scaled update (atol + rtol |y|,
+chains (the model's own where it has one, for the theta method; else a few
+coloured JVPs; block cyclic reduction, ``jaxstring._linalg``), so a step stays
+O(k). The iteration stops when the scaled update (atol + rtol |y|,
 RMS) is below `kappa` (chord: the update times theta / (1 - theta), theta the
 observed contraction rate); a step whose iteration has not converged after
 `max_iters` ends the solve with a failed status (never a silently wrong result).
@@ -40,6 +41,7 @@ import jax.numpy as jnp
 
 from .. import _linalg
 from .._jit import traced_once
+from .._scene import Scene
 from .newton import chord as newton_chord
 
 
@@ -79,6 +81,25 @@ class _ThetaResidual(eqx.Module):
         if f0 is None:  # theta = 1: implicit Euler
             return dy - h * f1
         return dy - h * (self.theta * f1 + (1 - self.theta) * f0)
+
+    def model_jacobian(self, dy, a):
+        """The residual's Jacobian at `dy`, `I - h theta J(t1, y0 + dy)`, from the
+        model's own Jacobian (`AbstractModel.vf_jacobian`) where the ODE's `args`
+        are a `Scene` whose model has one, else None (then it is probed with
+        JVPs). The term is checked at run time to be the scene's vector field
+        (else the matrix is NaN and the step fails loudly), as
+        `stage_newton`'s stage Jacobian is."""
+        t1, y0, h, _, terms, args = a
+        if not (isinstance(args, Scene) and args.structure.jacobian):
+            return None
+        if not (jnp.shape(h) == () and jnp.shape(y0) == jnp.shape(dy)):
+            return None
+        y = y0 + dy
+        jac = args.model.vf_jacobian(t1, y, args.effects, args.env)
+        if jac is None:
+            return None
+        same = jnp.array_equal(terms.vf(t1, y, args), args.vector_field(t1, y))
+        return jac.scale_shift(1.0, jnp.where(same, -h * self.theta, jnp.nan))
 
 
 class _NewmarkResidual(eqx.Module):
@@ -134,6 +155,16 @@ def _newton(
     """
     width = _linalg.choose_structure(residual, x0, a, linear_solver)
     fn = lambda u: residual(u, a)
+    own = getattr(residual, "model_jacobian", None)
+
+    def residual_and_jacobian(x):
+        """(residual, its Jacobian) at x: the model's own where the residual has
+        one (`_ThetaResidual.model_jacobian`), else probed with JVPs."""
+        jac = own(x, a) if own is not None and width == 1 else None
+        if jac is not None:
+            return fn(x), jac
+        r, lin = jax.linearize(fn, x)
+        return r, _linalg.jacobian(fn, x, width, lin)
 
     def scaled(x_from, x_to):
         dy = y_of_x(x_from) - y_of_x(x_to)
@@ -152,8 +183,8 @@ def _newton(
         x, i, _ = carry
         if x_restart is not None:
             x = jnp.where(i == restart_at, x_restart, x)
-        r, lin = jax.linearize(fn, x)
-        fac = _linalg.factor(_linalg.jacobian(fn, x, width, lin))
+        r, jac = residual_and_jacobian(x)
+        fac = _linalg.factor(jac)
         dx = fac.solve(r)
         size = scaled(x, x - dx)
 
@@ -207,8 +238,7 @@ def _newton(
     if chord_iters > 0:
         # Simplified Newton with the one factorisation at x0 (no prediction of
         # the remaining iterations: the full Newton below takes over instead).
-        _, lin0 = jax.linearize(fn, x0)
-        fac0 = _linalg.factor(_linalg.jacobian(fn, x0, width, lin0))
+        fac0 = _linalg.factor(residual_and_jacobian(x0)[1])
         x_c, ok_c, _ = newton_chord(
             fn,
             fac0.solve,

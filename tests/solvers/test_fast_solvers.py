@@ -443,3 +443,67 @@ def test_stage_model_jacobian_only_for_the_scenes_own_relation():
     assert (
         _stage_model_jacobian(angle.y0, args[:5] + (angle.y0, angle, args[7])) is None
     )
+
+
+def test_theta_method_model_jacobian_only_for_the_scenes_own_vector_field():
+    # The theta method's residual r(dy) = dy - h (theta f(t1, y0 + dy) + ...): with
+    # the scene's vector field its Jacobian is I - h theta J from the model; with
+    # another vector field and the scene as args the matrix is NaN (the Newton
+    # iteration fails instead of using the wrong Jacobian); a model without its
+    # own Jacobian gives None (probed with JVPs).
+    import diffrax as dfx
+
+    from jaxstring._solvers.fixed_step import _ThetaResidual
+
+    scene = js.string_pendulum(k=14, EA=1e4)
+    rng = np.random.default_rng(11)
+    y0 = scene.y0 + 0.01 * jnp.asarray(rng.standard_normal(scene.y0.shape))
+    dy = 1e-3 * jnp.asarray(rng.standard_normal(y0.shape))
+    h, t1, theta = jnp.asarray(2e-3), jnp.asarray(0.1), 0.5
+    term = dfx.ODETerm(lambda t, u, s: s.vector_field(t, u))
+    residual = _ThetaResidual(theta)
+    f0 = scene.vector_field(t1 - h, y0)
+    jac = residual.model_jacobian(dy, (t1, y0, h, f0, term, scene))
+    J = dense_jacobian(scene, y0 + dy, 0.1)
+    expect = np.eye(J.shape[0]) - float(h) * theta * J
+    assert np.max(np.abs(np.asarray(jac.to_dense()) - expect)) < 1e-12 * np.max(
+        np.abs(expect)
+    )
+    # the residual's own derivative, by autodiff, is the same matrix
+    auto = jax.jacfwd(
+        lambda d: residual(d.reshape(dy.shape), (t1, y0, h, f0, term, scene))
+    )(dy.ravel())
+    assert np.max(np.abs(np.asarray(auto).reshape(expect.shape) - expect)) < 1e-10
+    other = dfx.ODETerm(lambda t, u, s: 2.0 * s.vector_field(t, u))
+    bad = residual.model_jacobian(dy, (t1, y0, h, f0, other, scene))
+    assert np.all(np.isnan(np.asarray(bad.to_dense())[:, 4:]))
+    angle = js.string_pendulum("angle", k=14)
+    a = (t1, angle.y0, h, None, term, angle)
+    assert residual.model_jacobian(jnp.zeros_like(angle.y0), a) is None
+
+
+@pytest.mark.parametrize("solver", ("implicit_euler_fixed", "theta"))
+def test_fixed_step_solvers_with_the_model_jacobian_equal_the_probed_one(solver):
+    # The same fixed-step solve (k = 14, banded) with the model's Jacobian and,
+    # through an unknown (zero) load, with the coloured-JVP one: both solve each
+    # step's equation to the Newton test, so the trajectories agree far inside
+    # the Newton tolerance, and both converge to a tight Kvaerno5 reference at
+    # the method's order (halving the step: implicit Euler's error halves, the
+    # trapezoidal rule's quarters).
+    scene = js.string_pendulum("displacement", k=14, EA=1e4, t1=0.3)
+    probed = eqx.tree_at(lambda s: s.effects, scene, scene.effects + (ZeroLoad(),))
+    assert scene.structure.jacobian and not probed.structure.jacobian
+    ts = jnp.linspace(0.0, 0.3, 9)
+    a = js.simulate(scene, solver, dt0=1e-3, ts=ts)
+    b = js.simulate(probed, solver, dt0=1e-3, ts=ts)
+    half = js.simulate(scene, solver, dt0=5e-4, ts=ts)
+    assert a.ok and b.ok and half.ok
+    diff = float(np.max(np.abs(np.asarray(a.ys) - np.asarray(b.ys))))
+    assert diff < 1e-10, diff
+    ref = _reference("displacement", 14, 1e4, 0.3)
+    err, err_half = (
+        float(np.max(np.linalg.norm(t.end_mass[::2] - ref.end_mass, axis=1)))
+        for t in (a, half)
+    )
+    order = 1 if solver == "implicit_euler_fixed" else 2
+    assert 0.9 * 2**order < err / err_half < 1.1 * 2**order, (err, err_half)
