@@ -755,11 +755,11 @@ STUDIES = (
         ),
         (
             Run((), _files("first_result")),
-            Run(("--ref", "425b50c", "--rounds", "2"), _files("first_result_ref")),
+            Run(("--ref", "00dd603", "--rounds", "2"), _files("first_result_ref")),
             Run(
                 (
                     "--ref",
-                    "e67f451",
+                    "e603934",
                     "--rounds",
                     "3",
                     "--only",
