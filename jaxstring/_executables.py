@@ -193,19 +193,45 @@ def _import(modules) -> None:
             pass
 
 
-def compile_and_save(lowered, folder, key: str, tier: str, lapack: bool, compiler=None):
+def compile_and_save(
+    lowered, folder, key: str, tier: str, lapack: bool, compiler=None, jax_cache=True
+):
     """`lowered` compiled (by `compiler(lowered)`, default `lowered.compile()`) and,
     where that compiled it rather than reading it from JAX's compilation cache,
-    saved in `folder` (None: not saved) with the flag `lapack` (`uses_lapack`)."""
+    saved in `folder` (None: not saved) with the flag `lapack` (`uses_lapack`).
+    `jax_cache`: False where no other process reads the compilation from JAX's
+    cache (`_no_cache_write`)."""
     if _WHILE_COMPILING:
         modules = tuple(_WHILE_COMPILING)
         _WHILE_COMPILING.clear()
         threading.Thread(target=_import, args=(modules,), name="imports").start()
     hits = _cache_hits()
-    compiled = lowered.compile() if compiler is None else compiler(lowered)
+    with contextlib.nullcontext() if jax_cache else _no_cache_write():
+        compiled = lowered.compile() if compiler is None else compiler(lowered)
     if folder is not None and _cache_hits() == hits:
         _write(path(folder, key, tier), compiled, lapack)
     return compiled
+
+
+@contextlib.contextmanager
+def _no_cache_write():
+    """Within the block (in this thread), JAX writes no compilation to its
+    persistent cache. A saved program's executable is saved by jaxstring (and
+    is the one a later process loads): JAX's own copy of it, serialised and
+    written a second time (0.04 s for the default scene's solve, 0.2 s for a
+    MoorDyn deck's programs), would only be read by a process that traces the
+    same program again, whose executable then could not be saved (an
+    executable read from that cache serialises incompletely). JAX's threshold
+    of compilation time for a write is a thread-local setting (private: for
+    another JAX, where it has moved, the block writes as before)."""
+    try:
+        from jax._src import config
+
+        threshold = config.persistent_cache_min_compile_time_secs(float("inf"))
+    except (ImportError, AttributeError, TypeError):  # moved: written as before
+        threshold = contextlib.nullcontext()
+    with threshold:
+        yield
 
 
 def _write(target: pathlib.Path, compiled, lapack: bool) -> None:

@@ -10,9 +10,10 @@ well by this machine: its processor, XLA's version and flags); a later process
 on the same machine loads the executable and runs it, neither tracing nor
 lowering nor compiling. Where only the traced program fits (another machine, a
 tiered program's other compilation) it is lowered and compiled from the saved
-trace, its compilation read from JAX's compilation cache where it is there. The
-process that traces a program compiles the export's own lowering
-(`jaxstring._executables.export_with_lowering`), not the exported program's call.
+trace. The process that traces a program compiles the export's own lowering
+(`jaxstring._executables.export_with_lowering`), not the exported program's call,
+and a saved program's compilation is not written to JAX's compilation cache as
+well (`jaxstring._executables.compile_and_save`'s ``jax_cache``).
 
 A saved program is keyed by everything that decides the traced program: the
 function's module and name (a function whose result depends on its arguments
@@ -316,12 +317,14 @@ class _Program:
                     compiled = executables.compile_and_save(
                         fresh, folder, self._key, tier, lapack,
                         compiler=lambda lowered: lowered.compile(options),
+                        jax_cache=folder is None,
                     )  # fmt: skip
                 else:
                     lowered = self._jitted(quick, leaves).lower(*leaves)
                     compiled = executables.compile_and_save(
-                        lowered, folder, self._key, tier, lapack
-                    )
+                        lowered, folder, self._key, tier, lapack,
+                        jax_cache=folder is None,
+                    )  # fmt: skip
             self._compilations[quick] = compiled
         return compiled
 

@@ -258,6 +258,10 @@ if mode == "executable only":
     def refuse(*args):
         raise AssertionError("the traced program was read")
     _programs._exported = refuse
+if mode == "trace, into JAX's cache too":
+    import contextlib
+    from jaxstring import _executables
+    _executables._no_cache_write = contextlib.nullcontext
 a = np.array([[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
 b = np.array([1.0, 2.0, 3.0])
 out = _programs.call(solve_module.solve, jnp.asarray(a), jnp.asarray(b))
@@ -388,21 +392,33 @@ def test_a_process_that_traces_a_program_compiles_the_exports_own_lowering(
 
 
 def test_an_executable_read_from_jaxs_cache_is_not_saved(tmp_path):
-    # XLA:CPU serialises an executable loaded from JAX's compilation cache
-    # incompletely: a program compiled by reading that cache (here: the same
-    # program saved into a second, empty folder) keeps its traced program only,
-    # and a third process runs it from there.
-    cache, one, two = (tmp_path / name for name in ("cache", "one", "two"))
-    for folder in (cache, one, two):
+    # A saved program's compilation goes to its program folder only, not to
+    # JAX's compilation cache as well: a second process with another folder and
+    # the same JAX cache compiles it and saves its own executable. Where a
+    # compilation does come from JAX's cache (a pool's workers share theirs
+    # there; here a first process made to write it), XLA:CPU serialises it
+    # incompletely, so the program keeps its traced program only, and a later
+    # process runs it from there.
+    names = ("cache", "one", "two", "cache2", "three", "four")
+    cache, one, two, cache2, three, four = (tmp_path / name for name in names)
+    for folder in (cache, one, two, cache2, three, four):
         folder.mkdir()
     first = _run_solve_driver(tmp_path, one, "trace", jax_cache=cache)
     assert len(list(one.glob("*.full.executable"))) == 1
+    assert not [f for f in cache.iterdir() if "saved_" in f.name]
     second = _run_solve_driver(tmp_path, two, "trace", jax_cache=cache)
-    assert len(list(two.glob("*.program"))) == 1
-    assert not list(two.glob("*.executable"))
-    third = _run_solve_driver(tmp_path, two, "trace", jax_cache=cache)
-    assert third["traces"] == 0
-    assert second["x"] == first["x"] == third["x"]
+    assert second["traces"] == 1
+    assert len(list(two.glob("*.full.executable"))) == 1
+    third = _run_solve_driver(
+        tmp_path, three, "trace, into JAX's cache too", jax_cache=cache2
+    )
+    assert [f for f in cache2.iterdir() if "saved_" in f.name]
+    fourth = _run_solve_driver(tmp_path, four, "trace", jax_cache=cache2)
+    assert len(list(four.glob("*.program"))) == 1
+    assert not list(four.glob("*.executable"))
+    fifth = _run_solve_driver(tmp_path, four, "trace", jax_cache=cache2)
+    assert fifth["traces"] == 0
+    assert first["x"] == second["x"] == third["x"] == fourth["x"] == fifth["x"]
 
 
 def test_eager_calls_are_saved_programs_that_a_later_process_reads(tmp_path):
