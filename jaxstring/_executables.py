@@ -66,7 +66,8 @@ def export_with_lowering(jitted, avals):
     the exported program would lower it again, around a copy of its module
     (serialised and read back), and JAX's lowering of such a call makes LAPACK's
     kernels ready whether or not the program calls them (importing
-    `scipy.linalg`: 0.25 s of a cold process). `jax.export` keeps its lowering
+    `scipy.linalg`; measured: docs/performance.md, "A warm process runs the saved
+    executable"). `jax.export` keeps its lowering
     to itself, so this repeats its two steps (trace; lower for export; JAX's
     private `_export_lowered`) for the JAX versions in `EXPORT_TESTED`; for
     another version, or where that API has moved, it exports through the
@@ -218,10 +219,10 @@ def _no_cache_write():
     """Within the block (in this thread), JAX writes no compilation to its
     persistent cache. A saved program's executable is saved by jaxstring (and
     is the one a later process loads): JAX's own copy of it, serialised and
-    written a second time (0.04 s for the default scene's solve, 0.2 s for a
-    MoorDyn deck's programs), would only be read by a process that traces the
-    same program again, whose executable then could not be saved (an
-    executable read from that cache serialises incompletely). JAX's threshold
+    written a second time (docs/performance.md), would only be read by a
+    process that traces the same program again, whose executable then could
+    not be saved (an executable read from that cache serialises incompletely).
+    JAX's threshold
     of compilation time for a write is a thread-local setting (private: for
     another JAX, where it has moved, the block writes as before)."""
     try:
