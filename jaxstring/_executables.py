@@ -52,10 +52,8 @@ def named_call(exported, key: str, tier: str):
     return call
 
 
-EXPORT_TESTED = (
-    (0, 10, 2),
-    (0, 11, 0),
-)  # the JAX versions `export_with_lowering` reads
+# The JAX versions whose private export steps `export_with_lowering` repeats.
+EXPORT_TESTED = ((0, 10, 2), (0, 11, 0))  # >= 0.10.2, < 0.11
 
 
 def export_with_lowering(jitted, avals):
@@ -67,11 +65,10 @@ def export_with_lowering(jitted, avals):
     (serialised and read back), and JAX's lowering of such a call makes LAPACK's
     kernels ready whether or not the program calls them (importing
     `scipy.linalg`; measured: docs/performance.md, "A warm process runs the saved
-    executable"). `jax.export` keeps its lowering
-    to itself, so this repeats its two steps (trace; lower for export; JAX's
-    private `_export_lowered`) for the JAX versions in `EXPORT_TESTED`; for
-    another version, or where that API has moved, it exports through the
-    public function and returns no lowering."""
+    executable"). `jax.export` keeps its lowering to itself, so this repeats its
+    steps (trace; lower for export; JAX's private `_export_lowered`) for the JAX
+    versions in `EXPORT_TESTED`; for another version, or where that API has
+    moved, it exports through the public function and returns no lowering."""
     version = tuple(int(p) for p in jax.__version__.split(".")[:3] if p.isdigit())
     if EXPORT_TESTED[0] <= version < EXPORT_TESTED[1]:
         try:
@@ -222,9 +219,8 @@ def _no_cache_write():
     written a second time (docs/performance.md), would only be read by a
     process that traces the same program again, whose executable then could
     not be saved (an executable read from that cache serialises incompletely).
-    JAX's threshold
-    of compilation time for a write is a thread-local setting (private: for
-    another JAX, where it has moved, the block writes as before)."""
+    JAX's threshold of compilation time for a write is a thread-local setting
+    (private: for another JAX, where it has moved, the block writes as before)."""
     try:
         from jax._src import config
 

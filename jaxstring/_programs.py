@@ -314,17 +314,14 @@ class _Program:
                 lapack = executables.uses_lapack(self._exported)
                 if fresh is not None:
                     options = cpu_compiler_options(quick)
-                    compiled = executables.compile_and_save(
-                        fresh, folder, self._key, tier, lapack,
-                        compiler=lambda lowered: lowered.compile(options),
-                        jax_cache=folder is None,
-                    )  # fmt: skip
+                    lowered, compiler = fresh, lambda low: low.compile(options)
                 else:
                     lowered = self._jitted(quick, leaves).lower(*leaves)
-                    compiled = executables.compile_and_save(
-                        lowered, folder, self._key, tier, lapack,
-                        jax_cache=folder is None,
-                    )  # fmt: skip
+                    compiler = None
+                # (saved here: not in JAX's compilation cache as well)
+                compiled = executables.compile_and_save(
+                    lowered, folder, self._key, tier, lapack, compiler, jax_cache=False
+                )
             self._compilations[quick] = compiled
         return compiled
 

@@ -43,6 +43,7 @@ from .. import _linalg
 from .._jit import traced_once
 from .._scene import Scene
 from .newton import chord as newton_chord
+from .stage_newton import shifted_model_jacobian
 
 
 NEWTON_KINDS = ("chord", "full")
@@ -95,11 +96,8 @@ class _ThetaResidual(eqx.Module):
         if not (jnp.shape(h) == () and jnp.shape(y0) == jnp.shape(dy)):
             return None
         y = y0 + dy
-        jac = args.model.vf_jacobian(t1, y, args.effects, args.env)
-        if jac is None:
-            return None
-        same = jnp.array_equal(terms.vf(t1, y, args), args.vector_field(t1, y))
-        return jac.scale_shift(1.0, jnp.where(same, -h * self.theta, jnp.nan))
+        same = lambda: jnp.array_equal(terms.vf(t1, y, args), args.vector_field(t1, y))
+        return shifted_model_jacobian(args, t1, y, -h * self.theta, same)
 
 
 class _NewmarkResidual(eqx.Module):

@@ -142,14 +142,28 @@ def _stage_model_jacobian(u, args, shape_only=False):
         return None
     step = prod(u, control)
     y_at = yi + diagonal * step
-    jac = inner.model.vf_jacobian(ti, y_at, inner.effects, inner.env)
+
+    def same():
+        own = jnp.array_equal(vf(ti, y_at, inner), inner.vector_field(ti, y_at))
+        return own & jnp.array_equal(step, u * control)
+
+    return shifted_model_jacobian(
+        inner, ti, y_at, -diagonal * control, None if shape_only else same
+    )
+
+
+def shifted_model_jacobian(scene, t, y, coefficient, same=None):
+    """`I + coefficient J(t, y)` from the scene's model's own Jacobian
+    (`AbstractModel.vf_jacobian`), or None where the model has none. `same()`:
+    whether the relation being solved is the scene's own (its vector field);
+    where it is not, the matrix is NaN, so that a Newton iteration fails loudly
+    instead of using a wrong Jacobian (None: not checked, for a structure only)."""
+    jac = scene.model.vf_jacobian(t, y, scene.effects, scene.env)
     if jac is None:
         return None
-    if shape_only:
-        return jac.scale_shift(1.0, -diagonal * control)
-    same = jnp.array_equal(vf(ti, y_at, inner), inner.vector_field(ti, y_at))
-    same = same & jnp.array_equal(step, u * control)
-    return jac.scale_shift(1.0, jnp.where(same, -diagonal * control, jnp.nan))
+    if same is not None:
+        coefficient = jnp.where(same(), coefficient, jnp.nan)
+    return jac.scale_shift(1.0, coefficient)
 
 
 def _identity_like(struct):
